@@ -1,0 +1,491 @@
+"""Typed, validated configuration shared by the live node and the offline replay.
+
+Every tunable lives in one table, :data:`PARAMETERS`. The node declares its ROS parameters
+from it (with descriptions and ranges), the replay reads the same YAML block through
+:meth:`PlaneNodeConfig.from_ros_params`, and the README's parameter table is generated from
+it, so there is one set of defaults and one validator.
+
+Each part of the pipeline gets a frozen dataclass that validates itself in ``__post_init__``,
+so a config built by hand through the Python API is checked as strictly as a params file.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, fields
+import math
+from typing import Any, Mapping
+
+from domplane_ros.errors import ConfigError
+
+POTENTIAL_NAMES = ('least_squares', 'truncated_quadratic', 'huber', 'geman_mcclure')
+FEATURE_KINDS = ('points',)
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One ROS parameter: name, default, type and admissible values.
+
+    ``kind`` is one of ``'float'``, ``'int'``, ``'bool'``, ``'str'``, ``'range'`` (two
+    floats ``[min, max]`` with ``min <= max``), ``'floats'`` (a list of floats whose allowed
+    lengths are given by ``lengths``).
+    """
+
+    name: str
+    default: Any
+    kind: str
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] | None = None
+    lengths: tuple[int, ...] | None = None
+
+
+PARAMETERS: tuple[ParamSpec, ...] = (
+    # Features.
+    ParamSpec('features.max_points', 400, 'int',
+              'Maximum number of corner points detected per image.', 8, 5000),
+    ParamSpec('features.quality_level', 0.01, 'float',
+              'Corner quality relative to the strongest corner (cv2.goodFeaturesToTrack).',
+              1e-4, 1.0),
+    ParamSpec('features.min_distance_px', 8.0, 'float',
+              'Minimum distance between two detected corners, in pixels.', 1.0, 200.0),
+    ParamSpec('features.block_size', 5, 'int',
+              'Neighbourhood size of the corner detector, in pixels.', 3, 31),
+    ParamSpec('features.grid_rows', 4, 'int',
+              'Rows of the detection grid; each cell keeps its share of the corners.', 1, 32),
+    ParamSpec('features.grid_cols', 4, 'int',
+              'Columns of the detection grid.', 1, 32),
+    ParamSpec('features.roi', [0.0, 0.0, 1.0, 1.0], 'floats',
+              'Region of interest in the left image as fractions [x0, y0, x1, y1] '
+              '(0..1, x0 < x1, y0 < y1).', 0.0, 1.0, lengths=(4,)),
+    # Estimator.
+    ParamSpec('estimator.potential', 'geman_mcclure', 'str',
+              'Robust potential: least_squares, truncated_quadratic, huber or '
+              'geman_mcclure (graduated non-convexity).', choices=POTENTIAL_NAMES),
+    ParamSpec('estimator.lambda_weight', 0.6, 'float',
+              'Interpolation weight lambda in (0, 1): how far an auxiliary point moves from '
+              'the prediction toward its closest point.', 0.01, 0.99),
+    ParamSpec('estimator.threshold_px', 3.0, 'float',
+              'Robust threshold (truncation, Huber corner, Geman-McClure scale) in pixels; '
+              'points farther than this from every partner are off the plane.', 0.1, 200.0),
+    ParamSpec('estimator.gnc_start_px', 24.0, 'float',
+              'Geman-McClure only: initial (wide) scale of graduated non-convexity, pixels.',
+              0.1, 500.0),
+    ParamSpec('estimator.gnc_factor', 0.5, 'float',
+              'Geman-McClure only: factor by which the scale shrinks per stage.', 0.05, 0.95),
+    ParamSpec('estimator.max_iterations', 60, 'int',
+              'Iteration cap of one two-step run (per GNC stage).', 1, 10000),
+    ParamSpec('estimator.tolerance_px', 0.01, 'float',
+              'Convergence when no prediction moves more than this, in pixels.', 1e-6, 10.0),
+    ParamSpec('estimator.energy_tolerance', 1e-7, 'float',
+              'Convergence when the relative energy decrease falls below this.', 0.0, 1.0),
+    ParamSpec('estimator.min_inliers', 12, 'int',
+              'Fewer inliers than this is a failed estimate.', 4, 100000),
+    # Prior.
+    ParamSpec('prior.focal_px', [400.0, 900.0], 'range',
+              'Focal length range [min, max] in pixels.', 1.0, 1e5),
+    ParamSpec('prior.baseline_over_height', [0.05, 0.4], 'range',
+              'Stereo baseline divided by camera height above the plane, [min, max].',
+              1e-4, 100.0),
+    ParamSpec('prior.tilt_deg', [10.0, 50.0], 'range',
+              'Camera tilt toward the plane [min, max] in degrees (positive looks down).',
+              -89.0, 89.0),
+    ParamSpec('prior.vergence_deg', [-2.0, 4.0], 'range',
+              "Vergence: the right camera's yaw toward the left camera, [min, max] degrees.",
+              -45.0, 45.0),
+    ParamSpec('prior.samples', 4, 'int',
+              'Samples per prior range for the candidate grid (samples^4 candidates).', 1, 12),
+    ParamSpec('prior.refine_best', 3, 'int',
+              'Candidates (best by screening energy) that get the full iteration.', 1, 100),
+    ParamSpec('prior.screen_threshold_px', 12.0, 'float',
+              'Truncation of the cheap closest-point screening energy, in pixels.', 0.5, 500.0),
+    ParamSpec('initial_homography', [], 'floats',
+              'Optional initial homography, 9 values row-major, left pixel to right pixel; '
+              'empty means search the prior.', lengths=(0, 9)),
+    # Mask.
+    ParamSpec('mask.scale', 0.5, 'float',
+              'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),
+    ParamSpec('mask.window_px', 7, 'int',
+              'Side of the window of the normalised comparison, pixels at mask scale.', 3, 31),
+    ParamSpec('mask.ncc_threshold', 0.5, 'float',
+              'Local normalised correlation above which a pixel is on the plane.', -1.0, 1.0),
+    ParamSpec('mask.min_texture', 3.0, 'float',
+              'Local grey-level standard deviation below which a pixel is unknown.', 0.0, 255.0),
+    ParamSpec('mask.morph_px', 5, 'int',
+              'Size of the morphological clean-up, pixels at mask scale (0 disables).', 0, 51),
+    # Pipeline.
+    ParamSpec('pipeline.max_energy_ratio', 4.0, 'float',
+              'A warm-started estimate whose energy per point exceeds this multiple of the '
+              'last good one triggers a re-initialisation from the prior.', 1.0, 1e6),
+    ParamSpec('pipeline.check_prior_bounds', True, 'bool',
+              'Reject homographies that move the image corners outside what the prior allows.'),
+    # Synchroniser and transport.
+    ParamSpec('sync.slop_s', 0.01, 'float',
+              'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
+    ParamSpec('sync.queue_size', 5, 'int',
+              'Per-camera queue of the synchroniser; the oldest frame is dropped when full.',
+              1, 1000),
+    ParamSpec('qos.reliable', False, 'bool',
+              'Subscribe with reliable QoS instead of sensor-data (best effort).'),
+    ParamSpec('qos.depth', 2, 'int', 'Subscription queue depth.', 1, 100),
+    ParamSpec('diagnostics.period_s', 1.0, 'float',
+              'Period of the /diagnostics status, seconds.', 0.05, 60.0),
+)
+
+PARAMETERS_BY_NAME: dict[str, ParamSpec] = {spec.name: spec for spec in PARAMETERS}
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def check_value(spec: ParamSpec, value: Any) -> Any:
+    """Validate one parameter value against its spec and return it normalised.
+
+    Args:
+        spec: The parameter's specification.
+        value: The value as read from YAML or a ROS parameter.
+
+    Returns:
+        The value converted to its canonical Python type (lists become lists of floats).
+
+    Raises:
+        ConfigError: If the type is wrong or the value is outside its admissible set; the
+            message names the parameter.
+
+    """
+    name = spec.name
+    if spec.kind == 'bool':
+        if not isinstance(value, bool):
+            raise ConfigError(f'parameter {name!r}: expected a bool, got {value!r}')
+        return value
+    if spec.kind == 'str':
+        if not isinstance(value, str):
+            raise ConfigError(f'parameter {name!r}: expected a string, got {value!r}')
+        if spec.choices is not None and value not in spec.choices:
+            raise ConfigError(
+                f'parameter {name!r}: {value!r} is not one of {", ".join(spec.choices)}')
+        return value
+    if spec.kind == 'int':
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ConfigError(f'parameter {name!r}: expected an integer, got {value!r}')
+        _check_bounds(spec, value)
+        return int(value)
+    if spec.kind == 'float':
+        if not _is_number(value) or not math.isfinite(value):
+            raise ConfigError(f'parameter {name!r}: expected a finite number, got {value!r}')
+        _check_bounds(spec, float(value))
+        return float(value)
+    # Lists: 'range' and 'floats'.
+    if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+        raise ConfigError(f'parameter {name!r}: expected a list of numbers, got {value!r}')
+    items = list(value)
+    if not all(_is_number(v) and math.isfinite(v) for v in items):
+        raise ConfigError(f'parameter {name!r}: expected finite numbers, got {items!r}')
+    items = [float(v) for v in items]
+    if spec.kind == 'range':
+        if len(items) != 2:
+            raise ConfigError(f'parameter {name!r}: expected [min, max], got {items!r}')
+        if items[0] > items[1]:
+            raise ConfigError(
+                f'parameter {name!r}: inverted range [min, max] = {items!r} (min > max)')
+        for v in items:
+            _check_bounds(spec, v)
+        return items
+    if spec.lengths is not None and len(items) not in spec.lengths:
+        allowed = ' or '.join(str(n) for n in spec.lengths)
+        raise ConfigError(
+            f'parameter {name!r}: expected {allowed} values, got {len(items)}')
+    for v in items:
+        _check_bounds(spec, v)
+    return items
+
+
+def _check_bounds(spec: ParamSpec, value: float) -> None:
+    if spec.low is not None and value < spec.low:
+        raise ConfigError(
+            f'parameter {spec.name!r}: {value!r} is below the minimum {spec.low!r}')
+    if spec.high is not None and value > spec.high:
+        raise ConfigError(
+            f'parameter {spec.name!r}: {value!r} is above the maximum {spec.high!r}')
+
+
+def flatten_params(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Flatten a nested parameter mapping into dotted names.
+
+    ``{'prior': {'tilt_deg': [0, 5]}}`` and ``{'prior.tilt_deg': [0, 5]}`` both give
+    ``{'prior.tilt_deg': [0, 5]}``.
+
+    Args:
+        params: The ``ros__parameters`` block, nested or already dotted.
+        prefix: Name prefix used for recursion.
+
+    Returns:
+        A flat dict from dotted parameter name to value.
+
+    Raises:
+        ConfigError: If ``params`` is not a mapping.
+
+    """
+    if not isinstance(params, Mapping):
+        raise ConfigError(f'parameters must be a mapping, got {type(params).__name__}')
+    flat: dict[str, Any] = {}
+    for key, value in params.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(flatten_params(value, prefix=name + '.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+@dataclass(frozen=True)
+class FeatureConfig:
+    """Corner detection settings (see ``features.*`` in :data:`PARAMETERS`)."""
+
+    max_points: int = 400
+    quality_level: float = 0.01
+    min_distance_px: float = 8.0
+    block_size: int = 5
+    grid_rows: int = 4
+    grid_cols: int = 4
+    roi: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'features')
+        x0, y0, x1, y1 = self.roi
+        if not (x0 < x1 and y0 < y1):
+            raise ConfigError(f"parameter 'features.roi': empty region {list(self.roi)!r}")
+
+
+@dataclass(frozen=True)
+class EstimatorConfig:
+    """Two-step iteration settings (see ``estimator.*`` in :data:`PARAMETERS`)."""
+
+    potential: str = 'geman_mcclure'
+    lambda_weight: float = 0.6
+    threshold_px: float = 3.0
+    gnc_start_px: float = 24.0
+    gnc_factor: float = 0.5
+    max_iterations: int = 60
+    tolerance_px: float = 0.01
+    energy_tolerance: float = 1e-7
+    min_inliers: int = 12
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'estimator')
+
+
+@dataclass(frozen=True)
+class PriorConfig:
+    """Camera set-up ranges (see ``prior.*`` in :data:`PARAMETERS`)."""
+
+    focal_px: tuple[float, float] = (400.0, 900.0)
+    baseline_over_height: tuple[float, float] = (0.05, 0.4)
+    tilt_deg: tuple[float, float] = (10.0, 50.0)
+    vergence_deg: tuple[float, float] = (-2.0, 4.0)
+    samples: int = 4
+    refine_best: int = 3
+    screen_threshold_px: float = 12.0
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'prior')
+
+
+@dataclass(frozen=True)
+class MaskConfig:
+    """Dense mask settings (see ``mask.*`` in :data:`PARAMETERS`)."""
+
+    scale: float = 0.5
+    window_px: int = 7
+    ncc_threshold: float = 0.5
+    min_texture: float = 3.0
+    morph_px: int = 5
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'mask')
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Frame-to-frame policy (see ``pipeline.*`` in :data:`PARAMETERS`)."""
+
+    max_energy_ratio: float = 4.0
+    check_prior_bounds: bool = True
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'pipeline')
+
+
+@dataclass(frozen=True)
+class SyncConfig:
+    """Approximate-time pairing settings (see ``sync.*`` in :data:`PARAMETERS`)."""
+
+    slop_s: float = 0.01
+    queue_size: int = 5
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'sync')
+
+
+@dataclass(frozen=True)
+class TransportConfig:
+    """QoS and diagnostics settings of the node (``qos.*``, ``diagnostics.*``)."""
+
+    reliable: bool = False
+    depth: int = 2
+    diagnostics_period_s: float = 1.0
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        check_value(PARAMETERS_BY_NAME['qos.reliable'], self.reliable)
+        check_value(PARAMETERS_BY_NAME['qos.depth'], self.depth)
+        check_value(PARAMETERS_BY_NAME['diagnostics.period_s'], self.diagnostics_period_s)
+
+
+def _validate_section(obj: Any, section: str) -> None:
+    for f in fields(obj):
+        spec = PARAMETERS_BY_NAME[f'{section}.{f.name}']
+        value = getattr(obj, f.name)
+        checked = check_value(spec, list(value) if isinstance(value, tuple) else value)
+        if isinstance(checked, list):
+            checked = tuple(checked)
+        object.__setattr__(obj, f.name, checked)
+
+
+@dataclass(frozen=True)
+class PlaneNodeConfig:
+    """The whole configuration of a plane_node or plane_replay run."""
+
+    features: FeatureConfig = field(default_factory=FeatureConfig)
+    estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
+    prior: PriorConfig = field(default_factory=PriorConfig)
+    mask: MaskConfig = field(default_factory=MaskConfig)
+    pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    sync: SyncConfig = field(default_factory=SyncConfig)
+    transport: TransportConfig = field(default_factory=TransportConfig)
+    initial_homography: tuple[float, ...] = ()
+
+    def __post_init__(self) -> None:
+        """Validate the initial homography."""
+        values = check_value(PARAMETERS_BY_NAME['initial_homography'],
+                             list(self.initial_homography))
+        object.__setattr__(self, 'initial_homography', tuple(values))
+
+    @classmethod
+    def from_ros_params(cls, params: Mapping[str, Any]) -> PlaneNodeConfig:
+        """Build a config from a ``plane_node: ros__parameters:`` block.
+
+        Missing parameters take their defaults.
+
+        Args:
+            params: The ``ros__parameters`` mapping, nested or with dotted names.
+
+        Returns:
+            The validated configuration.
+
+        Raises:
+            ConfigError: On an unknown parameter, a wrong type, an out-of-range value or an
+                inverted ``[min, max]`` range; the message names the parameter.
+
+        """
+        flat = flatten_params(params)
+        unknown = sorted(set(flat) - set(PARAMETERS_BY_NAME))
+        if unknown:
+            raise ConfigError(f'unknown parameter {unknown[0]!r}'
+                              + (f' (and {len(unknown) - 1} more)' if len(unknown) > 1 else ''))
+        values = {spec.name: spec.default for spec in PARAMETERS}
+        for name, value in flat.items():
+            values[name] = check_value(PARAMETERS_BY_NAME[name], value)
+        return cls.from_flat(values)
+
+    @classmethod
+    def from_flat(cls, values: Mapping[str, Any]) -> PlaneNodeConfig:
+        """Build a config from a complete flat mapping of dotted names to checked values.
+
+        Args:
+            values: One value per name in :data:`PARAMETERS`.
+
+        Returns:
+            The validated configuration.
+
+        Raises:
+            ConfigError: If a value is invalid.
+
+        """
+        def section(prefix: str) -> dict[str, Any]:
+            out = {}
+            for name, value in values.items():
+                if name.startswith(prefix + '.'):
+                    out[name[len(prefix) + 1:]] = tuple(value) if isinstance(
+                        value, list) else value
+            return out
+
+        return cls(
+            features=FeatureConfig(**section('features')),
+            estimator=EstimatorConfig(**section('estimator')),
+            prior=PriorConfig(**section('prior')),
+            mask=MaskConfig(**section('mask')),
+            pipeline=PipelineConfig(**section('pipeline')),
+            sync=SyncConfig(**section('sync')),
+            transport=TransportConfig(
+                reliable=values['qos.reliable'], depth=values['qos.depth'],
+                diagnostics_period_s=values['diagnostics.period_s']),
+            initial_homography=tuple(values['initial_homography']),
+        )
+
+    def to_flat(self) -> dict[str, Any]:
+        """Return the configuration as dotted parameter names and values."""
+        out: dict[str, Any] = {}
+        for prefix in ('features', 'estimator', 'prior', 'mask', 'pipeline', 'sync'):
+            part = getattr(self, prefix)
+            for f in fields(part):
+                value = getattr(part, f.name)
+                out[f'{prefix}.{f.name}'] = list(value) if isinstance(value, tuple) else value
+        out['qos.reliable'] = self.transport.reliable
+        out['qos.depth'] = self.transport.depth
+        out['diagnostics.period_s'] = self.transport.diagnostics_period_s
+        out['initial_homography'] = list(self.initial_homography)
+        return out
+
+
+def load_params_file(path: str, node_name: str = 'plane_node') -> PlaneNodeConfig:
+    """Read a ROS 2 parameters YAML file and validate the node's block.
+
+    Accepts ``plane_node: ros__parameters:``, ``/plane_node: ...`` and ``/**: ...`` blocks.
+
+    Args:
+        path: Path to the YAML file.
+        node_name: The node whose block is read.
+
+    Returns:
+        The validated configuration.
+
+    Raises:
+        ConfigError: If the file cannot be read or parsed, has no block for the node, or
+            holds an invalid parameter.
+
+    """
+    import yaml
+
+    try:
+        with open(path, encoding='utf-8') as stream:
+            document = yaml.safe_load(stream)
+    except OSError as err:
+        raise ConfigError(f'cannot read params file {path!r}: {err.strerror}') from err
+    except yaml.YAMLError as err:
+        raise ConfigError(f'params file {path!r} is not valid YAML: {err}') from err
+    if not isinstance(document, Mapping):
+        raise ConfigError(f'params file {path!r} holds no parameter blocks')
+    for key in (node_name, '/' + node_name, '/**'):
+        block = document.get(key)
+        if isinstance(block, Mapping) and 'ros__parameters' in block:
+            return PlaneNodeConfig.from_ros_params(block['ros__parameters'] or {})
+    raise ConfigError(
+        f'params file {path!r} has no "{node_name}: ros__parameters:" block')

@@ -1,0 +1,432 @@
+"""Plane homographies: normalised weighted DLT, Euclidean refinement, transfer errors.
+
+Conventions: points are ``(N, 2) float64`` arrays of pixel coordinates ``(x, y)``; a
+homography is a ``(3, 3) float64`` array mapping ``(x, y, 1)`` of the first set to the
+second, scaled so that ``H[2, 2] == 1`` where that is possible (otherwise unit Frobenius
+norm). Fitting functions return the matrix, or a :class:`FailedEstimation` that carries the
+reason: they never return a non-finite matrix and never let a numpy error escape for
+degenerate data. Wrong shapes or types are programming errors and raise ``ValueError``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+# Points whose projective depth falls below this are "at infinity": they are placed far away
+# (finite) so that a closest-point search treats them as unmatched.
+_MIN_W = 1e-9
+_FAR_PX = 1e9
+
+
+@dataclass(frozen=True)
+class FailedEstimation:
+    """A failed estimate: false in a boolean context, with the reason in words."""
+
+    reason: str
+
+    def __bool__(self) -> bool:
+        """Return False: a failure never passes for a result."""
+        return False
+
+
+def as_points(points: object, name: str = 'points') -> np.ndarray:
+    """Return ``points`` as a ``(N, 2) float64`` array.
+
+    Args:
+        points: Anything array-like of shape (N, 2).
+        name: Name used in the error message.
+
+    Returns:
+        (N, 2) float64 array (a copy only when a conversion is needed).
+
+    Raises:
+        ValueError: If the shape is not (N, 2) or the values are not numbers.
+
+    """
+    try:
+        arr = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f'{name} must be numeric (N, 2) coordinates') from err
+    if arr.ndim != 2 or arr.shape[1] != 2:
+        raise ValueError(f'{name} must have shape (N, 2), got {arr.shape}')
+    return arr
+
+
+def as_homography(matrix: object, name: str = 'homography') -> np.ndarray:
+    """Return ``matrix`` as a ``(3, 3) float64`` array (9 row-major values are accepted).
+
+    Raises:
+        ValueError: If it does not hold 9 numbers.
+
+    """
+    try:
+        arr = np.asarray(matrix, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f'{name} must be numeric') from err
+    if arr.shape == (9,):
+        arr = arr.reshape(3, 3)
+    if arr.shape != (3, 3):
+        raise ValueError(f'{name} must have shape (3, 3) or (9,), got {arr.shape}')
+    return arr
+
+
+def check_homography(matrix: np.ndarray) -> str:
+    """Return why ``matrix`` is not a usable homography, or ``''`` if it is.
+
+    Args:
+        matrix: (3, 3) float64.
+
+    Returns:
+        An empty string for a finite, well-conditioned matrix; else the reason.
+
+    """
+    if not np.all(np.isfinite(matrix)):
+        return 'homography has non-finite entries'
+    s = np.linalg.svd(matrix, compute_uv=False)
+    if s[0] <= 0 or s[2] / s[0] < 1e-10:
+        return 'homography is singular'
+    return ''
+
+
+def normalise_scale(matrix: np.ndarray) -> np.ndarray:
+    """Scale a homography so that ``H[2, 2] == 1``, or to unit Frobenius norm if that is ~0."""
+    norm = np.linalg.norm(matrix)
+    if abs(matrix[2, 2]) > 1e-12 * norm:
+        return matrix / matrix[2, 2]
+    return matrix / norm
+
+
+def apply_homography(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Map points through a homography.
+
+    Points whose projective depth is (almost) zero map to a far-away finite position, so the
+    output is always finite for finite input.
+
+    Args:
+        matrix: (3, 3) float64 homography.
+        points: (N, 2) float64 pixel coordinates.
+
+    Returns:
+        (N, 2) float64 mapped coordinates.
+
+    """
+    x = points[:, 0]
+    y = points[:, 1]
+    u = matrix[0, 0] * x + matrix[0, 1] * y + matrix[0, 2]
+    v = matrix[1, 0] * x + matrix[1, 1] * y + matrix[1, 2]
+    w = matrix[2, 0] * x + matrix[2, 1] * y + matrix[2, 2]
+    small = np.abs(w) < _MIN_W
+    if np.any(small):
+        w = np.where(small, _MIN_W, w)
+        out = np.stack([u / w, v / w], axis=1)
+        return np.clip(out, -_FAR_PX, _FAR_PX)
+    return np.stack([u / w, v / w], axis=1)
+
+
+def transfer_error(matrix: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """Return the one-sided transfer error ``||H(src_i) - dst_i||`` in pixels, shape (N,)."""
+    return np.linalg.norm(apply_homography(matrix, src) - dst, axis=1)
+
+
+def similarity_normaliser(points: np.ndarray) -> np.ndarray:
+    """Return Hartley's (3, 3) similarity: centroid to the origin, mean distance sqrt(2).
+
+    Args:
+        points: (N, 2) float64, N >= 1, finite.
+
+    Returns:
+        (3, 3) float64 similarity transform ``T`` with ``T (x, y, 1)`` normalised.
+
+    """
+    centre = points.mean(axis=0)
+    mean_dist = np.mean(np.linalg.norm(points - centre, axis=1))
+    scale = np.sqrt(2.0) / mean_dist if mean_dist > 1e-12 else 1.0
+    return np.array([[scale, 0.0, -scale * centre[0]],
+                     [0.0, scale, -scale * centre[1]],
+                     [0.0, 0.0, 1.0]])
+
+
+def _transform(t: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Apply a similarity (no projective part) to (N, 2) points."""
+    return points * t[0, 0] + t[:2, 2]
+
+
+def count_distinct(points: np.ndarray, enough: int) -> int:
+    """Count the distinct rows of (N, 2) points, stopping early once ``enough`` are certain.
+
+    A projection on a generic direction is distinct for distinct points almost always, and
+    distinct projections prove distinct points, so the fast path is exact whenever it answers;
+    otherwise the exact row-wise count is taken.
+    """
+    projected = np.unique(points[:, 0] + 0.7548776662466927 * points[:, 1])
+    if projected.shape[0] >= enough:
+        return int(projected.shape[0])
+    return int(np.unique(points, axis=0).shape[0])
+
+
+def _degenerate_reason(src: np.ndarray, dst: np.ndarray,
+                       weights: np.ndarray | None) -> str:
+    if src.shape != dst.shape:
+        return f'point sets differ in shape: {src.shape} and {dst.shape}'
+    if not (np.all(np.isfinite(src)) and np.all(np.isfinite(dst))):
+        return 'points have non-finite coordinates'
+    if weights is not None:
+        if weights.shape != (src.shape[0],):
+            return f'weights must have shape ({src.shape[0]},), got {weights.shape}'
+        if not np.all(np.isfinite(weights)) or np.any(weights < 0):
+            return 'weights must be finite and non-negative'
+        src = src[weights > 0]
+        dst = dst[weights > 0]
+    if src.shape[0] < 4:
+        return f'need at least 4 point pairs, got {src.shape[0]}'
+    for pts, side in ((src, 'source'), (dst, 'destination')):
+        if count_distinct(pts, 4) < 4:
+            return f'fewer than 4 distinct {side} points'
+        centred = pts - pts.mean(axis=0)
+        s = np.linalg.svd(centred, compute_uv=False)
+        if s[1] <= 1e-9 * max(s[0], 1e-300):
+            return f'{side} points are collinear'
+    return ''
+
+
+def fit_homography_dlt(src: np.ndarray, dst: np.ndarray,
+                       weights: np.ndarray | None = None) -> np.ndarray | FailedEstimation:
+    """Fit a homography by the normalised, weighted direct linear transform.
+
+    Args:
+        src: (N, 2) float64 source points.
+        dst: (N, 2) float64 destination points, row i paired with ``src[i]``.
+        weights: Optional (N,) non-negative row weights (each point's two equations are
+            multiplied by ``sqrt(w)``).
+
+    Returns:
+        (3, 3) float64 homography with ``H[2, 2] == 1``, or :class:`FailedEstimation` for
+        fewer than 4 pairs, repeated or collinear points, non-finite values, or a
+        rank-deficient system.
+
+    Raises:
+        ValueError: If ``src`` or ``dst`` is not (N, 2).
+
+    """
+    src = as_points(src, 'src')
+    dst = as_points(dst, 'dst')
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)
+    reason = _degenerate_reason(src, dst, w)
+    if reason:
+        return FailedEstimation(reason)
+    if w is not None:
+        keep = w > 0
+        src, dst, w = src[keep], dst[keep], w[keep]
+    t_src = similarity_normaliser(src)
+    t_dst = similarity_normaliser(dst)
+    s = _transform(t_src, src)
+    d = _transform(t_dst, dst)
+    n = s.shape[0]
+    # At least 9 rows, so that the SVD also returns the null vector for 4 points.
+    a = np.zeros((max(2 * n, 9), 9))
+    ones = np.ones(n)
+    ax = a[:2 * n]
+    ax[0::2, 0] = -s[:, 0]
+    ax[0::2, 1] = -s[:, 1]
+    ax[0::2, 2] = -ones
+    ax[0::2, 6] = d[:, 0] * s[:, 0]
+    ax[0::2, 7] = d[:, 0] * s[:, 1]
+    ax[0::2, 8] = d[:, 0]
+    ax[1::2, 3] = -s[:, 0]
+    ax[1::2, 4] = -s[:, 1]
+    ax[1::2, 5] = -ones
+    ax[1::2, 6] = d[:, 1] * s[:, 0]
+    ax[1::2, 7] = d[:, 1] * s[:, 1]
+    ax[1::2, 8] = d[:, 1]
+    if w is not None:
+        a[:2 * n] *= np.repeat(np.sqrt(w), 2)[:, None]
+    try:
+        _, sv, vt = np.linalg.svd(a, full_matrices=False)
+    except np.linalg.LinAlgError:
+        return FailedEstimation('DLT did not converge (SVD failure)')
+    if sv[0] <= 0 or sv[-2] <= 1e-9 * sv[0]:
+        return FailedEstimation('DLT system is rank deficient (degenerate configuration)')
+    g = vt[-1].reshape(3, 3)
+    h = np.linalg.inv(t_dst) @ g @ t_src
+    reason = check_homography(h)
+    if reason:
+        return FailedEstimation(reason)
+    return normalise_scale(h)
+
+
+class NormalisedRefiner:
+    """Gauss-Newton refinement of a homography for a fixed source set.
+
+    It minimises the Euclidean (transfer) energy ``1/2 sum_i w_i ||H(src_i) - dst_i||^2`` in
+    pixels. The source points are normalised once (Hartley), the destination frame is fixed
+    by a similarity given at construction, so the same object serves many refinements with
+    different destinations, as the two-step iteration needs. Every accepted step lowers the
+    energy: a step that does not is halved, then rejected, so the energy never increases.
+
+    Args:
+        src: (N, 2) float64 source points.
+        dst_frame: (M, 2) float64 points that fix the destination normalisation (the right
+            point set); a similarity of it is used for conditioning only.
+
+    """
+
+    def __init__(self, src: np.ndarray, dst_frame: np.ndarray) -> None:
+        """Normalise the source points once."""
+        self.t_src = similarity_normaliser(src)
+        self.t_dst = similarity_normaliser(dst_frame)
+        self.t_dst_inv = np.linalg.inv(self.t_dst)
+        self.t_src_inv = np.linalg.inv(self.t_src)
+        self.src_n = _transform(self.t_src, src)
+        self.src_h = np.column_stack([self.src_n, np.ones(src.shape[0])])
+        self.dst_scale = self.t_dst[0, 0]
+
+    def to_normalised(self, matrix: np.ndarray) -> np.ndarray:
+        """Return ``T_dst H T_src^-1`` with unit Frobenius norm."""
+        g = self.t_dst @ matrix @ self.t_src_inv
+        return g / np.linalg.norm(g)
+
+    def from_normalised(self, g: np.ndarray) -> np.ndarray:
+        """Return the pixel homography ``T_dst^-1 G T_src`` scaled so ``H[2, 2] == 1``."""
+        return normalise_scale(self.t_dst_inv @ g @ self.t_src)
+
+    def energy(self, g: np.ndarray, dst_n: np.ndarray, weights: np.ndarray | None) -> float:
+        """Return the transfer energy in pixels^2 for normalised ``g`` and destinations."""
+        uvw = self.src_h @ g.T
+        w = uvw[:, 2]
+        if np.any(np.abs(w) < _MIN_W):
+            return float('inf')
+        rx = uvw[:, 0] / w - dst_n[:, 0]
+        ry = uvw[:, 1] / w - dst_n[:, 1]
+        sq = rx * rx + ry * ry
+        if weights is not None:
+            sq = sq * weights
+        return 0.5 * float(np.sum(sq)) / self.dst_scale ** 2
+
+    def refine(self, matrix: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None,
+               iterations: int = 3) -> tuple[np.ndarray, float, float]:
+        """Refine ``matrix`` toward ``dst`` by damped Gauss-Newton steps.
+
+        Args:
+            matrix: (3, 3) float64 starting homography (pixels).
+            dst: (N, 2) float64 destination points (pixels), paired with the source points.
+            weights: Optional (N,) non-negative weights.
+            iterations: Number of Gauss-Newton steps.
+
+        Returns:
+            ``(H, energy_before, energy_after)`` with ``energy_after <= energy_before``.
+
+        """
+        dst_n = _transform(self.t_dst, dst)
+        g = self.to_normalised(matrix)
+        e0 = self.energy(g, dst_n, weights)
+        e = e0
+        src_h = self.src_h
+        for _ in range(iterations):
+            uvw = src_h @ g.T
+            w = uvw[:, 2]
+            if np.any(np.abs(w) < _MIN_W):
+                break
+            iw = 1.0 / w
+            px = uvw[:, 0] * iw
+            py = uvw[:, 1] * iw
+            rx = px - dst_n[:, 0]
+            ry = py - dst_n[:, 1]
+            # The Jacobian of the x residual is [m, 0, -px m] and of the y residual
+            # [0, m, -py m], with m = (x, y, 1) / w: assemble J^T J and J^T r from 3x3 blocks.
+            m = src_h * iw[:, None]
+            mw = m if weights is None else m * weights[:, None]
+            a = mw.T @ m
+            b = mw.T @ (m * px[:, None])
+            c = mw.T @ (m * py[:, None])
+            d = mw.T @ (m * (px * px + py * py)[:, None])
+            normal = np.empty((9, 9))
+            normal[0:3, 0:3] = a
+            normal[3:6, 3:6] = a
+            normal[0:3, 3:6] = 0.0
+            normal[3:6, 0:3] = 0.0
+            normal[0:3, 6:9] = -b
+            normal[6:9, 0:3] = -b.T
+            normal[3:6, 6:9] = -c
+            normal[6:9, 3:6] = -c.T
+            normal[6:9, 6:9] = d
+            grad = np.concatenate([mw.T @ rx, mw.T @ ry, -(mw.T @ (px * rx + py * ry))])
+            gvec = g.ravel()
+            # J g = 0 (scale gauge); adding g g^T fixes the scale and makes the system regular.
+            normal += np.outer(gvec, gvec)
+            normal[np.diag_indices(9)] *= 1.0 + 1e-9
+            try:
+                step = -np.linalg.solve(normal, grad)
+            except np.linalg.LinAlgError:
+                break
+            accepted = False
+            for _ in range(4):
+                cand = gvec + step
+                cand = (cand / np.linalg.norm(cand)).reshape(3, 3)
+                if np.all(np.isfinite(cand)):
+                    ec = self.energy(cand, dst_n, weights)
+                    if ec <= e:
+                        g, e, accepted = cand, ec, True
+                        break
+                step *= 0.5
+            if not accepted:
+                break
+        return self.from_normalised(g), e0, e
+
+
+def refine_homography(matrix: np.ndarray, src: np.ndarray, dst: np.ndarray,
+                      weights: np.ndarray | None = None,
+                      iterations: int = 10) -> np.ndarray | FailedEstimation:
+    """Refine a homography by minimising the Euclidean transfer error (Gauss-Newton).
+
+    Args:
+        matrix: (3, 3) float64 initial homography.
+        src: (N, 2) float64 source points.
+        dst: (N, 2) float64 destination points.
+        weights: Optional (N,) non-negative weights.
+        iterations: Maximum number of Gauss-Newton steps.
+
+    Returns:
+        (3, 3) float64 refined homography (its transfer energy is never above the initial
+        one), or :class:`FailedEstimation` for degenerate input.
+
+    Raises:
+        ValueError: On wrong shapes.
+
+    """
+    matrix = as_homography(matrix)
+    src = as_points(src, 'src')
+    dst = as_points(dst, 'dst')
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)
+    reason = check_homography(matrix) or _degenerate_reason(src, dst, w)
+    if reason:
+        return FailedEstimation(reason)
+    refined, _, _ = NormalisedRefiner(src, dst).refine(matrix, dst, w, iterations)
+    reason = check_homography(refined)
+    if reason:
+        return FailedEstimation(reason)
+    return refined
+
+
+def fit_homography(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None,
+                   iterations: int = 10) -> np.ndarray | FailedEstimation:
+    """Fit a homography: normalised DLT, then Euclidean refinement.
+
+    Args:
+        src: (N, 2) float64 source points.
+        dst: (N, 2) float64 destination points.
+        weights: Optional (N,) non-negative weights.
+        iterations: Gauss-Newton steps of the refinement.
+
+    Returns:
+        (3, 3) float64 homography or :class:`FailedEstimation`.
+
+    Raises:
+        ValueError: On wrong shapes.
+
+    """
+    initial = fit_homography_dlt(src, dst, weights)
+    if not isinstance(initial, np.ndarray):
+        return initial
+    return refine_homography(initial, src, dst, weights, iterations)
