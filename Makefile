@@ -1,0 +1,55 @@
+# Development tasks for domplane_ros (GNU make). Everything runs in a local virtual environment,
+# .venv, built from requirements.txt (ROS 2 Jazzy rclpy and messages come from PyPI wheels).
+# A ROS install built with colcon does not need this file.
+
+SHELL := /bin/bash
+.DEFAULT_GOAL := test
+
+PYTHON ?= python3
+VENV := .venv
+VPY := $(VENV)/bin/python
+PYTEST_TIMEOUT_S ?= 300
+
+# Keep DDS traffic on this machine and away from other runs: loopback discovery only, and a
+# random domain per make invocation (test/conftest.py also gives its private contexts their
+# own random domain).
+export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
+export ROS_DOMAIN_ID ?= $(shell echo $$(( RANDOM % 200 + 1 )))
+# The source tree wins over the copy installed in .venv, so edits need no reinstall to test.
+RUN := PYTHONPATH=$(CURDIR)$${PYTHONPATH:+:$$PYTHONPATH} $(VPY)
+
+PACKAGE_FILES := setup.py setup.cfg package.xml $(wildcard resource/* config/*.yaml scripts/*) \
+	$(wildcard domplane_ros/*.py)
+
+.PHONY: venv test lint demo bench clean
+
+venv: $(VENV)/.installed
+
+# Third-party requirements: only when requirements.txt changes.
+$(VENV)/.stamp: requirements.txt
+	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
+	$(VPY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
+	touch $@
+
+# The package itself, as a normal (non-editable) install: setuptools' editable installs do not
+# install data_files (ament index marker, package.xml, config, lib/domplane_ros launchers).
+$(VENV)/.installed: $(VENV)/.stamp $(PACKAGE_FILES)
+	$(VPY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \
+		--force-reinstall .
+	touch $@
+
+test: venv
+	$(RUN) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) test
+
+lint: venv
+	$(RUN) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) test/test_flake8.py test/test_pep257.py
+
+demo: venv
+	$(RUN) -m domplane_ros.demo --output demo_output
+
+bench: venv
+	$(RUN) -m domplane_ros.bench
+
+clean:
+	rm -rf $(VENV) build domplane_ros.egg-info .pytest_cache .hypothesis demo_output \
+		bench_output eval_output

@@ -1,0 +1,1 @@
+"""Dominant ground plane homography from a stereo pair, without correspondences."""

@@ -1,0 +1,361 @@
+"""Duck-typed conversion between sensor_msgs images and numpy arrays.
+
+The decoders read only the fields ``encoding``, ``height``, ``width``, ``step``, ``is_bigendian``
+and ``data`` of a ``sensor_msgs/Image`` (and ``format`` and ``data`` of a
+``sensor_msgs/CompressedImage``), so they accept rclpy messages, whose ``data`` is an
+``array.array('B')``, rosbags messages, whose ``data`` is a ``uint8`` numpy array, and any other
+object with those attributes. Row padding (``step`` larger than ``width * bytes_per_pixel``) and
+big-endian 16-bit data are honoured.
+
+The encoders return plain dicts of message fields, so this module depends on no message class:
+the ROS adapter fills a message from the dict.
+
+This module is part of the core and imports no ROS package.
+"""
+
+from __future__ import annotations
+
+from array import array as py_array
+from typing import Any, NamedTuple
+
+import cv2
+from domplane_ros.errors import ImageDecodeError
+import numpy as np
+
+
+class _EncodingLayout(NamedTuple):
+    """Memory layout of a raw image encoding."""
+
+    channels: int
+    bytes_per_channel: int
+    gray_conversion: int | None  # cv2.cvtColor code to gray; None for one channel.
+
+
+_LAYOUTS: dict[str, _EncodingLayout] = {
+    'mono8': _EncodingLayout(1, 1, None),
+    '8UC1': _EncodingLayout(1, 1, None),
+    'mono16': _EncodingLayout(1, 2, None),
+    'rgb8': _EncodingLayout(3, 1, cv2.COLOR_RGB2GRAY),
+    'bgr8': _EncodingLayout(3, 1, cv2.COLOR_BGR2GRAY),
+    '8UC3': _EncodingLayout(3, 1, cv2.COLOR_BGR2GRAY),  # OpenCV's channel order: BGR.
+    'rgba8': _EncodingLayout(4, 1, cv2.COLOR_RGBA2GRAY),
+    'bgra8': _EncodingLayout(4, 1, cv2.COLOR_BGRA2GRAY),
+}
+
+SUPPORTED_ENCODINGS: tuple[str, ...] = tuple(_LAYOUTS)
+"""Raw ``sensor_msgs/Image`` encodings that :func:`image_to_gray` decodes."""
+
+SUPPORTED_COMPRESSED_FORMATS: tuple[str, ...] = ('jpeg', 'png')
+"""Compression names that :func:`compressed_to_gray` accepts in ``CompressedImage.format``."""
+
+
+def _integer_field(msg: Any, name: str, allow_bool: bool = False) -> int:
+    """Read a message field that must hold a non-negative integer.
+
+    Args:
+        msg: The message.
+        name: The field name.
+        allow_bool: Whether a ``bool`` value is accepted (for ``is_bigendian``).
+
+    Returns:
+        The field value as a Python int.
+
+    Raises:
+        ImageDecodeError: If the field is missing, not an integer, or negative.
+
+    """
+    try:
+        value = getattr(msg, name)
+    except AttributeError as err:
+        raise ImageDecodeError(f'image message has no {name!r} field') from err
+    if isinstance(value, (bool, np.bool_)) and allow_bool:
+        return int(value)
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise ImageDecodeError(
+            f'image field {name!r} must be an integer, got {value!r} '
+            f'of type {type(value).__name__}')
+    value = int(value)
+    if value < 0:
+        raise ImageDecodeError(f'image field {name!r} must be non-negative, got {value}')
+    return value
+
+
+def _data_bytes(data: Any) -> np.ndarray:
+    """View message data as a flat ``uint8`` array.
+
+    Args:
+        data: ``bytes``, ``bytearray``, ``memoryview``, ``array.array('B')``, a ``uint8`` numpy
+            array, or a sequence of ints in [0, 255].
+
+    Returns:
+        ``(N,) uint8`` array. It may share memory with ``data``; callers copy before returning.
+
+    Raises:
+        ImageDecodeError: If ``data`` is not a byte buffer.
+
+    """
+    if isinstance(data, np.ndarray):
+        if data.dtype != np.uint8:
+            raise ImageDecodeError(f'image data must have dtype uint8, got {data.dtype}')
+        return np.ascontiguousarray(data).reshape(-1)
+    if isinstance(data, (list, tuple)):
+        try:
+            return np.frombuffer(bytes(data), dtype=np.uint8)
+        except (TypeError, ValueError) as err:
+            raise ImageDecodeError(
+                f'image data must be a sequence of ints in [0, 255]: {err}') from err
+    if not isinstance(data, (bytes, bytearray, memoryview, py_array)):
+        raise ImageDecodeError(
+            f'image data must be bytes, array.array or a uint8 numpy array, '
+            f'got {type(data).__name__}')
+    view = memoryview(data)
+    if view.itemsize != 1:
+        raise ImageDecodeError(
+            f'image data must be bytes, got items of {view.itemsize} bytes '
+            f'(format {view.format!r})')
+    return np.frombuffer(view.cast('B') if view.ndim != 1 else view, dtype=np.uint8)
+
+
+def _encoding_layout(encoding: Any) -> _EncodingLayout:
+    """Look up the layout of a raw encoding.
+
+    Args:
+        encoding: The message's ``encoding`` field.
+
+    Returns:
+        The encoding's layout.
+
+    Raises:
+        ImageDecodeError: If the encoding is not a string or not supported.
+
+    """
+    if not isinstance(encoding, str):
+        raise ImageDecodeError(
+            f"image field 'encoding' must be a string, got {type(encoding).__name__}")
+    try:
+        return _LAYOUTS[encoding]
+    except KeyError:
+        raise ImageDecodeError(
+            f'unsupported encoding {encoding!r}; supported encodings are '
+            f'{", ".join(SUPPORTED_ENCODINGS)}') from None
+
+
+def image_to_array(msg: Any) -> tuple[np.ndarray, str]:
+    """Decode a raw ``sensor_msgs/Image`` into its native numpy array.
+
+    Args:
+        msg: An object with the fields ``encoding``, ``height``, ``width``, ``step``,
+            ``is_bigendian`` and ``data`` of ``sensor_msgs/Image``.
+
+    Returns:
+        A tuple ``(array, encoding)``. ``array`` is a new C-contiguous array that shares no
+        memory with the message: ``(H, W) uint8`` for mono8 and 8UC1, ``(H, W) uint16`` in
+        native byte order for mono16, and ``(H, W, C) uint8`` in the encoding's channel order
+        for rgb8, bgr8, 8UC3 (C = 3), rgba8 and bgra8 (C = 4). ``encoding`` is the message's
+        encoding.
+
+    Raises:
+        ImageDecodeError: If the encoding is unsupported, a field is missing or not an integer,
+            the width or height is zero, ``step`` is smaller than ``width * bytes_per_pixel``,
+            or the data length is not ``height * step``.
+
+    """
+    layout = _encoding_layout(getattr(msg, 'encoding', None))
+    height = _integer_field(msg, 'height')
+    width = _integer_field(msg, 'width')
+    step = _integer_field(msg, 'step')
+    is_bigendian = _integer_field(msg, 'is_bigendian', allow_bool=True)
+    if height == 0 or width == 0:
+        raise ImageDecodeError(f'image has zero width or height ({width}x{height})')
+    bytes_per_pixel = layout.channels * layout.bytes_per_channel
+    if step < width * bytes_per_pixel:
+        raise ImageDecodeError(
+            f'step {step} is smaller than width * bytes_per_pixel = {width} * '
+            f'{bytes_per_pixel} = {width * bytes_per_pixel}')
+    try:
+        data = _data_bytes(msg.data)
+    except AttributeError as err:
+        raise ImageDecodeError("image message has no 'data' field") from err
+    if data.size != height * step:
+        raise ImageDecodeError(
+            f'data length {data.size} != height * step = {height} * {step} = {height * step}')
+
+    if layout.bytes_per_channel == 2:
+        dtype = np.dtype('>u2' if is_bigendian else '<u2')
+        shape: tuple[int, ...] = (height, width)
+        strides: tuple[int, ...] = (step, 2)
+    else:
+        dtype = np.dtype(np.uint8)
+        if layout.channels == 1:
+            shape, strides = (height, width), (step, 1)
+        else:
+            shape = (height, width, layout.channels)
+            strides = (step, layout.channels, 1)
+    # A strided view skips the row padding; astype copies into native byte order.
+    view = np.ndarray(shape=shape, dtype=dtype, buffer=data, strides=strides)
+    return view.astype(dtype.newbyteorder('='), order='C', copy=True), msg.encoding
+
+
+def image_to_gray(msg: Any) -> np.ndarray:
+    """Decode a raw ``sensor_msgs/Image`` to an 8-bit gray image.
+
+    Colour encodings are converted with OpenCV's ITU-R BT.601 luma weights. mono16 is scaled
+    to 8 bits by keeping the high byte (``value >> 8``).
+
+    Args:
+        msg: An object with the fields ``encoding``, ``height``, ``width``, ``step``,
+            ``is_bigendian`` and ``data`` of ``sensor_msgs/Image``. Supported encodings are
+            listed in :data:`SUPPORTED_ENCODINGS`.
+
+    Returns:
+        ``(H, W) uint8`` C-contiguous array that shares no memory with the message.
+
+    Raises:
+        ImageDecodeError: As :func:`image_to_array`.
+
+    """
+    array, encoding = image_to_array(msg)
+    layout = _LAYOUTS[encoding]
+    if layout.bytes_per_channel == 2:
+        return (array >> 8).astype(np.uint8)
+    if layout.gray_conversion is None:
+        return array
+    return cv2.cvtColor(array, layout.gray_conversion)
+
+
+def compressed_to_gray(msg: Any) -> np.ndarray:
+    """Decode a ``sensor_msgs/CompressedImage`` (JPEG or PNG) to an 8-bit gray image.
+
+    Args:
+        msg: An object with the fields ``format`` and ``data`` of
+            ``sensor_msgs/CompressedImage``. ``format`` must name jpeg (or jpg) or png, as in
+            ``'jpeg'`` or ``'bgr8; jpeg compressed bgr8'``; compressedDepth is not supported.
+
+    Returns:
+        ``(H, W) uint8`` C-contiguous array.
+
+    Raises:
+        ImageDecodeError: If the format is not a string, names no supported compression or
+            names compressedDepth, the data is empty or not bytes, or OpenCV cannot decode it.
+
+    """
+    fmt = getattr(msg, 'format', None)
+    if not isinstance(fmt, str):
+        raise ImageDecodeError(
+            f"compressed image field 'format' must be a string, got {type(fmt).__name__}")
+    lowered = fmt.lower()
+    if 'compresseddepth' in lowered:
+        raise ImageDecodeError(f'unsupported compressed format {fmt!r}: compressedDepth')
+    if not any(name in lowered for name in ('jpeg', 'jpg', 'png')):
+        raise ImageDecodeError(
+            f'unsupported compressed format {fmt!r}; supported compressions are '
+            f'{", ".join(SUPPORTED_COMPRESSED_FORMATS)}')
+    try:
+        data = _data_bytes(msg.data)
+    except AttributeError as err:
+        raise ImageDecodeError("compressed image message has no 'data' field") from err
+    if data.size == 0:
+        raise ImageDecodeError(f'compressed image data is empty (format {fmt!r})')
+    gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    if gray is None or gray.size == 0:
+        raise ImageDecodeError(
+            f'OpenCV could not decode {data.size} bytes of compressed image data '
+            f'(format {fmt!r})')
+    if gray.dtype != np.uint8:  # IMREAD_GRAYSCALE gives 8 bits; keep the contract anyway.
+        gray = (gray.astype(np.uint16) >> 8).astype(np.uint8)
+    return np.ascontiguousarray(gray)
+
+
+def message_to_gray(msg: Any) -> np.ndarray:
+    """Decode a raw or compressed image message to an 8-bit gray image.
+
+    Args:
+        msg: A ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage`` like object; objects
+            with a ``format`` attribute are treated as compressed.
+
+    Returns:
+        ``(H, W) uint8`` C-contiguous array.
+
+    Raises:
+        ImageDecodeError: As :func:`image_to_gray` or :func:`compressed_to_gray`.
+
+    """
+    if hasattr(msg, 'format'):
+        return compressed_to_gray(msg)
+    return image_to_gray(msg)
+
+
+def gray_to_image_fields(array: np.ndarray, encoding: str = 'mono8') -> dict[str, Any]:
+    """Build the fields of a ``sensor_msgs/Image`` from a one-channel image.
+
+    Args:
+        array: ``(H, W) uint8`` for mono8 or 8UC1, ``(H, W) uint16`` for mono16. H and W must
+            be positive.
+        encoding: ``'mono8'``, ``'8UC1'`` or ``'mono16'``.
+
+    Returns:
+        A dict with the keys ``height``, ``width``, ``encoding``, ``is_bigendian``, ``step``
+        and ``data`` (``bytes``, unpadded rows; mono16 is written little-endian with
+        ``is_bigendian = 0``).
+
+    Raises:
+        ValueError: If the encoding is not one of the above, or the array's shape or dtype
+            does not fit it.
+
+    """
+    dtypes = {'mono8': np.uint8, '8UC1': np.uint8, 'mono16': np.uint16}
+    if encoding not in dtypes:
+        raise ValueError(
+            f'encoding must be one of {", ".join(dtypes)} for a gray image, got {encoding!r}')
+    array = np.asarray(array)
+    if array.ndim != 2 or 0 in array.shape:
+        raise ValueError(f'gray image must have shape (H, W) with H, W > 0, got {array.shape}')
+    if array.dtype.newbyteorder('=') != np.dtype(dtypes[encoding]):
+        raise ValueError(
+            f'{encoding} image must have dtype {np.dtype(dtypes[encoding])}, got {array.dtype}')
+    height, width = array.shape
+    little_endian = array.astype(array.dtype.newbyteorder('<'), copy=False)
+    return {
+        'height': int(height),
+        'width': int(width),
+        'encoding': encoding,
+        'is_bigendian': 0,
+        'step': int(width * array.dtype.itemsize),
+        'data': np.ascontiguousarray(little_endian).tobytes(),
+    }
+
+
+def rgb_to_image_fields(array: np.ndarray, encoding: str = 'rgb8') -> dict[str, Any]:
+    """Build the fields of a ``sensor_msgs/Image`` from a three-channel 8-bit image.
+
+    Args:
+        array: ``(H, W, 3) uint8`` with H, W > 0, channels in the order that ``encoding``
+            names.
+        encoding: ``'rgb8'`` or ``'bgr8'``.
+
+    Returns:
+        A dict with the keys ``height``, ``width``, ``encoding``, ``is_bigendian``, ``step``
+        and ``data`` (``bytes``, unpadded rows).
+
+    Raises:
+        ValueError: If the encoding is not rgb8 or bgr8, or the array is not
+            ``(H, W, 3) uint8``.
+
+    """
+    if encoding not in ('rgb8', 'bgr8'):
+        raise ValueError(f'encoding must be rgb8 or bgr8 for a colour image, got {encoding!r}')
+    array = np.asarray(array)
+    if array.ndim != 3 or array.shape[2] != 3 or 0 in array.shape:
+        raise ValueError(
+            f'colour image must have shape (H, W, 3) with H, W > 0, got {array.shape}')
+    if array.dtype != np.uint8:
+        raise ValueError(f'colour image must have dtype uint8, got {array.dtype}')
+    height, width, _ = array.shape
+    return {
+        'height': int(height),
+        'width': int(width),
+        'encoding': encoding,
+        'is_bigendian': 0,
+        'step': int(width * 3),
+        'data': np.ascontiguousarray(array).tobytes(),
+    }
