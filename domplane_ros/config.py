@@ -62,7 +62,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('estimator.potential', 'geman_mcclure', 'str',
               'Robust potential: least_squares, truncated_quadratic, huber or '
               'geman_mcclure (graduated non-convexity).', choices=POTENTIAL_NAMES),
-    ParamSpec('estimator.lambda_weight', 0.6, 'float',
+    ParamSpec('estimator.lambda_weight', 0.8, 'float',
               'Interpolation weight lambda in (0, 1): how far an auxiliary point moves from '
               'the prediction toward its closest point.', 0.01, 0.99),
     ParamSpec('estimator.threshold_px', 3.0, 'float',
@@ -79,6 +79,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Convergence when no prediction moves more than this, in pixels.', 1e-6, 10.0),
     ParamSpec('estimator.energy_tolerance', 1e-7, 'float',
               'Convergence when the relative energy decrease falls below this.', 0.0, 1.0),
+    ParamSpec('estimator.euclidean_refinement', True, 'bool',
+              'After convergence, fit H to the inliers and their closest points by '
+              'Gauss-Newton on the transfer error (sub-pixel accuracy).'),
     ParamSpec('estimator.min_inliers', 12, 'int',
               'Fewer inliers than this is a failed estimate.', 4, 100000),
     # Prior.
@@ -264,13 +267,14 @@ class EstimatorConfig:
     """Two-step iteration settings (see ``estimator.*`` in :data:`PARAMETERS`)."""
 
     potential: str = 'geman_mcclure'
-    lambda_weight: float = 0.6
+    lambda_weight: float = 0.8
     threshold_px: float = 3.0
     gnc_start_px: float = 24.0
     gnc_factor: float = 0.5
     max_iterations: int = 60
     tolerance_px: float = 0.01
     energy_tolerance: float = 1e-7
+    euclidean_refinement: bool = True
     min_inliers: int = 12
 
     def __post_init__(self) -> None:

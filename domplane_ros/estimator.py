@@ -36,6 +36,7 @@ from domplane_ros.prior import prior_candidates, screen_candidates
 
 _GLOBAL_STEP_ITERATIONS = 2
 _POLISH_ROUNDS = 2
+OVER_RELAXATION = 0.5
 
 
 @dataclass(frozen=True)
@@ -88,6 +89,7 @@ class FailedEstimate(FailedEstimation):
     iterations: int = 0
     energy_trace: np.ndarray = field(default_factory=lambda: np.zeros(0))
     n_inliers: int = 0
+    stage_trace: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     ok: bool = field(default=False, init=False)
 
 
@@ -145,7 +147,11 @@ class _TwoStep:
         energy = float(np.sum(terms))
         energies.append(energy)
         for it in range(1, options.max_iterations + 1):
-            h_new, _, _ = self.refiner.refine(h, aux, None, _GLOBAL_STEP_ITERATIONS)
+            h_new, e_before, _ = self.refiner.refine(h, aux, None, _GLOBAL_STEP_ITERATIONS)
+            if OVER_RELAXATION > 0:
+                ext = self.refiner.extrapolate(h, h_new, aux, OVER_RELAXATION, e_before)
+                if ext is not None:
+                    h_new = ext[0]
             pred_new = apply_homography(h_new, self.left)
             _, _, aux_new, pen_new, terms_new = self.local_step(pred_new, potential)
             # Step check: keep a previous auxiliary point where it is cheaper under the new H.
@@ -227,14 +233,18 @@ def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
     trace = np.asarray(energies)
     reason = check_homography(h)
     if reason:
-        return FailedEstimate(reason, iterations, trace)
-    h, r, idx = state.polish(h, options.threshold_px)
+        return FailedEstimate(reason, iterations, trace, 0, np.asarray(stages, np.int64))
+    if options.euclidean_refinement:
+        h, r, idx = state.polish(h, options.threshold_px)
+    else:
+        r, idx = state.tree.query(apply_homography(h, state.left))
     h = normalise_scale(h)
     inliers = r < options.threshold_px
     if np.count_nonzero(inliers) < options.min_inliers:
         return FailedEstimate(
             f'too few inliers: {np.count_nonzero(inliers)} < min_inliers '
-            f'{options.min_inliers}', iterations, trace, int(np.count_nonzero(inliers)))
+            f'{options.min_inliers}', iterations, trace, int(np.count_nonzero(inliers)),
+            np.asarray(stages, np.int64))
     return PlaneEstimate(
         homography=h, inliers=inliers, matches=idx.astype(np.int64), residuals_px=r,
         iterations=iterations, energy_trace=trace, stage_trace=np.asarray(stages, np.int64),

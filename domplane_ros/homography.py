@@ -304,6 +304,36 @@ class NormalisedRefiner:
             sq = sq * weights
         return 0.5 * float(np.sum(sq)) / self.dst_scale ** 2
 
+    def extrapolate(self, previous: np.ndarray, current: np.ndarray, dst: np.ndarray,
+                    factor: float, bound: float) -> tuple[np.ndarray, float] | None:
+        """Over-relax: move past ``current`` along ``current - previous`` by ``factor``.
+
+        Args:
+            previous: (3, 3) float64 homography before the last update.
+            current: (3, 3) float64 homography after it.
+            dst: (N, 2) float64 destinations of the transfer energy.
+            factor: Extrapolation factor (0 gives ``current``).
+            bound: Largest admissible transfer energy of the result.
+
+        Returns:
+            ``(H, energy)`` when the extrapolated homography's transfer energy is at most
+            ``bound``, else None.
+
+        """
+        g0 = self.to_normalised(previous)
+        g1 = self.to_normalised(current)
+        if float(np.sum(g0 * g1)) < 0:
+            g0 = -g0
+        g = g1 + factor * (g1 - g0)
+        norm = np.linalg.norm(g)
+        if not np.isfinite(norm) or norm == 0:
+            return None
+        g = g / norm
+        e = self.energy(g, _transform(self.t_dst, dst), None)
+        if e <= bound:
+            return self.from_normalised(g), e
+        return None
+
     def refine(self, matrix: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None,
                iterations: int = 3) -> tuple[np.ndarray, float, float]:
         """Refine ``matrix`` toward ``dst`` by damped Gauss-Newton steps.

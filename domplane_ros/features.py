@@ -1,0 +1,140 @@
+"""Corner detection spread over the image by a grid.
+
+The estimator needs well-localised corners that repeat in both images, spread over the floor
+rather than piled up on the most textured obstacle. :func:`detect_corners` computes the
+Shi-Tomasi (minimum eigenvalue) corner response once over the region of interest, keeps the
+local maxima above ``quality_level`` times the strongest response that are also the strongest
+within ``min_distance_px``, and then takes corners round-robin over the grid cells: first the
+best corner of every cell, then the second best, and so on. Every cell thus gets an equal
+share of ``max_points``, and cells with too few corners give the rest of their share to the
+others. The chosen corners are refined to sub-pixel accuracy by ``cv2.cornerSubPix``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import cv2
+import numpy as np
+
+from domplane_ros.config import FeatureConfig
+
+# Corner responses at or below this are noise-free flat image regions (cv2.cornerMinEigenVal
+# normalises gradients of 8-bit images to [0, 1], so a one-grey-level step is ~1e-6).
+_MIN_RESPONSE = 1e-7
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 10, 0.03)
+
+
+def _check_image(gray: np.ndarray) -> None:
+    if not isinstance(gray, np.ndarray):
+        raise ValueError(f'gray must be a numpy array, got {type(gray).__name__}')
+    if gray.ndim != 2:
+        raise ValueError(f'gray must be a 2-D (H, W) image, got shape {gray.shape}')
+    if gray.dtype != np.uint8:
+        raise ValueError(f'gray must have dtype uint8, got {gray.dtype}')
+
+
+def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, int, int, int]:
+    """Convert a fractional region of interest to pixel bounds.
+
+    Args:
+        roi: ``(x0, y0, x1, y1)`` as fractions of the image size, ``0 <= x0 < x1 <= 1`` and
+            ``0 <= y0 < y1 <= 1``.
+        width: Image width in pixels.
+        height: Image height in pixels.
+
+    Returns:
+        ``(x0, y0, x1, y1)`` integer pixel bounds, end exclusive, clipped to the image.
+
+    Raises:
+        ValueError: If ``roi`` does not hold four finite fractions forming a non-empty box.
+
+    """
+    try:
+        values = [float(v) for v in roi]
+    except (TypeError, ValueError) as err:
+        raise ValueError(f'roi must be four numbers (x0, y0, x1, y1), got {roi!r}') from err
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f'roi must be four finite numbers (x0, y0, x1, y1), got {roi!r}')
+    x0, y0, x1, y1 = values
+    if not (0.0 <= x0 < x1 <= 1.0 and 0.0 <= y0 < y1 <= 1.0):
+        raise ValueError(
+            f'roi must be fractions with 0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1, got {roi!r}')
+    return (int(math.floor(x0 * width)), int(math.floor(y0 * height)),
+            int(math.ceil(x1 * width)), int(math.ceil(y1 * height)))
+
+
+def detect_corners(gray: np.ndarray, config: FeatureConfig,
+                   roi: Sequence[float] | None = None) -> np.ndarray:
+    """Detect corners spread over a grid of cells, refined to sub-pixel accuracy.
+
+    Args:
+        gray: (H, W) uint8 image.
+        config: Detector settings: ``max_points``, ``quality_level``, ``min_distance_px``,
+            ``block_size``, ``grid_rows`` x ``grid_cols`` and the default ``roi``.
+        roi: Optional ``(x0, y0, x1, y1)`` region of interest as fractions of the image size;
+            overrides ``config.roi``. The grid divides this region.
+
+    Returns:
+        (N, 2) float64 corner positions ``(x, y)`` in full-image pixels, ``N <= max_points``,
+        in selection order (best corners of every cell first). A flat (for example black)
+        image, or an image or region too small for the detector window, gives (0, 2).
+
+    Raises:
+        ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
+
+    """
+    _check_image(gray)
+    height, width = gray.shape
+    x0, y0, x1, y1 = roi_to_pixels(config.roi if roi is None else roi, width, height)
+    empty = np.zeros((0, 2), np.float64)
+    block = int(config.block_size)
+    # Candidates keep this far from the image border, so the response window and the
+    # sub-pixel window stay inside the image.
+    border = block // 2 + 2
+    lo_x, lo_y = max(x0, border), max(y0, border)
+    hi_x, hi_y = min(x1, width - border), min(y1, height - border)
+    if hi_x <= lo_x or hi_y <= lo_y:
+        return empty
+    # Compute the response on the region grown by a margin, so the region's edge is not an
+    # artificial image border.
+    pad = block // 2 + 1
+    cx0, cy0 = max(0, lo_x - pad), max(0, lo_y - pad)
+    cx1, cy1 = min(width, hi_x + pad), min(height, hi_y + pad)
+    response = cv2.cornerMinEigenVal(gray[cy0:cy1, cx0:cx1], block, ksize=3)
+    inner = response[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
+    strongest = float(inner.max())
+    if strongest <= _MIN_RESPONSE:
+        return empty
+    threshold = max(config.quality_level * strongest, _MIN_RESPONSE)
+    # Keep the strongest response within min_distance_px (a square neighbourhood).
+    radius = max(1, int(round(config.min_distance_px)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * radius + 1, 2 * radius + 1))
+    peaks = cv2.dilate(response, kernel)[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
+    ys, xs = np.nonzero((inner >= peaks) & (inner > threshold))
+    if ys.size == 0:
+        return empty
+    strength = inner[ys, xs]
+    # Round-robin over the grid cells: rank each corner within its cell by strength, then
+    # take rank 0 of every cell, then rank 1, ... (ties by strength).
+    rows = min(config.grid_rows, hi_y - lo_y)
+    cols = min(config.grid_cols, hi_x - lo_x)
+    cell = (ys * rows // (hi_y - lo_y)) * cols + xs * cols // (hi_x - lo_x)
+    order = np.lexsort((-strength, cell))
+    sorted_cell = cell[order]
+    first = np.searchsorted(sorted_cell, sorted_cell, side='left')
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size) - first
+    chosen = np.lexsort((-strength, rank))[:config.max_points]
+    corners = np.stack([xs[chosen] + lo_x, ys[chosen] + lo_y], axis=1).astype(np.float32)
+    half = max(1, block // 2)
+    cv2.cornerSubPix(gray, corners.reshape(-1, 1, 2), (half, half), (-1, -1),
+                     _SUBPIX_CRITERIA)
+    corners = corners.astype(np.float64)
+    # cornerSubPix can drift on blurry or edge-like corners; keep the integer peak there.
+    start = np.stack([xs[chosen] + lo_x, ys[chosen] + lo_y], axis=1).astype(np.float64)
+    drifted = np.any(np.abs(corners - start) > half, axis=1) | ~np.all(
+        np.isfinite(corners), axis=1)
+    corners[drifted] = start[drifted]
+    return corners
