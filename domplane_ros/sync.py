@@ -35,6 +35,7 @@ from __future__ import annotations
 import bisect
 from dataclasses import dataclass
 import math
+import numbers
 import threading
 from typing import Any, Literal
 
@@ -124,8 +125,8 @@ class SyncStats:
 class ApproximateTimeSync:
     """Greedy approximate-time synchroniser for a stereo pair of message streams.
 
-    Not re-entrant with respect to the items, but thread-safe: a lock guards the state, so the
-    left and right callbacks may run on different threads.
+    Thread-safe: a lock guards the state, so the left and right callbacks may run on different
+    threads of a multi-threaded executor.
 
     Example:
         >>> sync = ApproximateTimeSync(slop_s=0.01, queue_size=5)
@@ -140,7 +141,8 @@ class ApproximateTimeSync:
         """Make an empty synchroniser.
 
         Args:
-            slop_s: Largest stamp difference of a pair, in seconds; finite and > 0.
+            slop_s: Largest stamp difference of a pair, in seconds; finite and > 0. It is
+                rounded to whole nanoseconds.
             queue_size: Most messages kept waiting per side; an int >= 1.
 
         Raises:
@@ -148,14 +150,15 @@ class ApproximateTimeSync:
                 int >= 1.
 
         """
-        if (isinstance(slop_s, bool) or not isinstance(slop_s, (int, float))
+        if (isinstance(slop_s, bool) or not isinstance(slop_s, numbers.Real)
                 or not math.isfinite(slop_s) or slop_s <= 0):
             raise ValueError(f'slop_s must be a finite number > 0, got {slop_s!r}')
-        if isinstance(queue_size, bool) or not isinstance(queue_size, int) or queue_size < 1:
+        if (isinstance(queue_size, bool) or not isinstance(queue_size, numbers.Integral)
+                or queue_size < 1):
             raise ValueError(f'queue_size must be an int >= 1, got {queue_size!r}')
         self._slop_s = float(slop_s)
         self._slop_ns = int(round(self._slop_s * 1e9))
-        self._queue_size = queue_size
+        self._queue_size = int(queue_size)
         self._lock = threading.Lock()
         # Per side: stamps and items in increasing stamp order (parallel lists).
         self._stamps: dict[str, list[int]] = {side: [] for side in _SIDES}
@@ -215,7 +218,7 @@ class ApproximateTimeSync:
 
         Args:
             side: ``'left'`` or ``'right'``.
-            stamp_ns: The message stamp in nanoseconds (an int).
+            stamp_ns: The message stamp in nanoseconds (an integer).
             item: The message or anything else to carry into the pair.
 
         Returns:
@@ -229,7 +232,7 @@ class ApproximateTimeSync:
         """
         if side not in _OTHER:
             raise ValueError(f"side must be 'left' or 'right', got {side!r}")
-        if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, int):
+        if isinstance(stamp_ns, bool) or not isinstance(stamp_ns, numbers.Integral):
             raise ValueError(
                 f'stamp_ns must be an int (nanoseconds), got {type(stamp_ns).__name__}')
         with self._lock:
