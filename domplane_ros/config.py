@@ -493,3 +493,46 @@ def load_params_file(path: str, node_name: str = 'plane_node') -> PlaneNodeConfi
             return PlaneNodeConfig.from_ros_params(block['ros__parameters'] or {})
     raise ConfigError(
         f'params file {path!r} has no "{node_name}: ros__parameters:" block')
+
+
+def default_params_yaml(node_name: str = 'plane_node') -> str:
+    """Return a ROS 2 parameters file with every parameter at its default, commented."""
+    lines = [f'{node_name}:', '  ros__parameters:']
+    for spec in PARAMETERS:
+        value = spec.default
+        if isinstance(value, bool):
+            text = 'true' if value else 'false'
+        elif isinstance(value, str):
+            text = f"'{value}'"
+        elif isinstance(value, list):
+            text = '[' + ', '.join(_yaml_float(v) for v in value) + ']'
+        elif isinstance(value, float):
+            text = _yaml_float(value)
+        else:
+            text = repr(value)
+        lines.append(f'    # {spec.description}')
+        lines.append(f'    {spec.name}: {text}')
+    return '\n'.join(lines) + '\n'
+
+
+def _yaml_float(value: float) -> str:
+    """Format a float so that YAML 1.1 readers (PyYAML) parse it as a float, not a string."""
+    text = repr(float(value))
+    if 'e' in text and '.' not in text.split('e')[0]:
+        mantissa, exponent = text.split('e')
+        text = f'{mantissa}.0e{exponent}'
+    return text
+
+
+def parameters_markdown() -> str:
+    """Return the README's parameter table."""
+    rows = ['| parameter | default | range | description |', '|---|---|---|---|']
+    for spec in PARAMETERS:
+        if spec.choices:
+            rng = ', '.join(spec.choices)
+        elif spec.low is not None and spec.high is not None:
+            rng = f'{spec.low:g} .. {spec.high:g}'
+        else:
+            rng = ''
+        rows.append(f'| `{spec.name}` | `{spec.default}` | {rng} | {spec.description} |')
+    return '\n'.join(rows) + '\n'

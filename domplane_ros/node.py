@@ -1,0 +1,319 @@
+"""plane_node: the live ROS 2 adapter around :class:`~domplane_ros.pipeline.PlanePipeline`.
+
+Subscribes to ``left/image_raw`` and ``right/image_raw``, pairs them by stamp, and publishes
+``plane/homography``, ``plane/mask``, ``plane/debug_image`` (only while subscribed) and
+``/diagnostics``. Image callbacks only hand work over: a worker thread processes the newest
+pair, and a pair that is replaced before the worker takes it is counted as dropped.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+import sys
+import threading
+import time
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+import numpy as np
+import rclpy
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterException)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from rcl_interfaces.msg import SetParametersResult
+from sensor_msgs.msg import Image
+from std_msgs.msg import Float64MultiArray
+
+from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
+                                 PlaneNodeConfig)
+from domplane_ros.errors import ImageDecodeError
+from domplane_ros.image import message_to_gray
+from domplane_ros.mask import overlay
+from domplane_ros.pipeline import FrameResult, PlanePipeline
+from domplane_ros.ros_io import descriptor, diagnostics_msg, homography_msg, image_msg
+from domplane_ros.ros_io import READ_ONLY
+from domplane_ros.sync import ApproximateTimeSync, Pair
+
+_EMPTY_ARRAY_KINDS = {'floats': Parameter.Type.DOUBLE_ARRAY}
+_THROTTLE_S = 5.0
+_FAILURES_FOR_ERROR = 3
+
+
+def _stamp_ns(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+class PlaneNode(Node):
+    """Dominant ground plane and obstacle mask from a stereo pair.
+
+    Raises:
+        ConfigError: At construction, when a parameter (from a params file or overrides) is
+            invalid; the message names it.
+
+    """
+
+    def __init__(self, **kwargs: Any) -> None:
+        """Declare parameters, build the pipeline, publishers, subscriptions and timers."""
+        super().__init__('plane_node', **kwargs)
+        self._values = self._declare_parameters()
+        self.config = PlaneNodeConfig.from_flat(self._values)
+        self._lock = threading.Lock()          # guards pipeline, sync and config changes
+        self._cv = threading.Condition()       # guards the hand-over slot
+        self._pending: Pair | None = None
+        self._stop = False
+        self.pipeline = PlanePipeline(self.config)
+        self._sync = ApproximateTimeSync(self.config.sync.slop_s, self.config.sync.queue_size)
+        self._counters = {'pairs': 0, 'processed': 0, 'dropped_busy': 0, 'decode_errors': 0,
+                          'consecutive_failures': 0}
+        self._latency_ms: deque[float] = deque(maxlen=200)
+        self._last_result: FrameResult | None = None
+        self._last_error = ''
+        self._period_pairs = 0
+        self._period_start = time.monotonic()
+        self._qos_warned: set[str] = set()
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+
+        transport = self.config.transport
+        qos = QoSProfile(
+            history=HistoryPolicy.KEEP_LAST, depth=transport.depth,
+            reliability=(ReliabilityPolicy.RELIABLE if transport.reliable
+                         else ReliabilityPolicy.BEST_EFFORT),
+            durability=DurabilityPolicy.VOLATILE)
+        self._pub_h = self.create_publisher(Float64MultiArray, 'plane/homography', 10)
+        self._pub_mask = self.create_publisher(Image, 'plane/mask', 10)
+        self._pub_debug = self.create_publisher(Image, 'plane/debug_image', 2)
+        self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._subs = [
+            self.create_subscription(
+                Image, f'{side}/image_raw', lambda msg, s=side: self._on_image(s, msg), qos,
+                event_callbacks=SubscriptionEventCallbacks(
+                    incompatible_qos=lambda info, s=side: self._on_incompatible_qos(s, info)))
+            for side in ('left', 'right')]
+        self._diag_timer = self.create_timer(transport.diagnostics_period_s,
+                                             self._publish_diagnostics)
+        self._worker = threading.Thread(target=self._work, name='plane_node_worker',
+                                        daemon=True)
+        self._worker.start()
+        self.get_logger().info(
+            f'plane_node ready: {self._subs[0].topic_name} + {self._subs[1].topic_name}, '
+            f'{"reliable" if transport.reliable else "best-effort"} QoS, '
+            f'potential {self.config.estimator.potential}')
+
+    # --- Parameters -------------------------------------------------------------------------
+    def _declare_parameters(self) -> dict[str, Any]:
+        values: dict[str, Any] = {}
+        for spec in PARAMETERS:
+            default: Any = spec.default
+            if spec.kind in _EMPTY_ARRAY_KINDS and not default:
+                default = _EMPTY_ARRAY_KINDS[spec.kind]
+            try:
+                param = self.declare_parameter(spec.name, default, descriptor(spec))
+            except (InvalidParameterTypeException, InvalidParameterValueException,
+                    ParameterException) as err:
+                raise ConfigError(f'parameter {spec.name!r}: {err}') from err
+            value = param.value
+            if value is None:
+                value = spec.default
+            values[spec.name] = check_value(spec, _plain(value))
+        self._check_unknown_overrides()
+        return values
+
+    def _check_unknown_overrides(self) -> None:
+        overrides = getattr(self, '_parameter_overrides', {}) or {}
+        unknown = sorted(name for name in overrides
+                         if name not in PARAMETERS_BY_NAME and name != 'use_sim_time')
+        if unknown:
+            raise ConfigError(f'unknown parameter {unknown[0]!r}')
+
+    def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        trial = dict(self._values)
+        for param in params:
+            if param.name == 'use_sim_time':
+                continue
+            spec = PARAMETERS_BY_NAME.get(param.name)
+            if spec is None:
+                return SetParametersResult(successful=False,
+                                           reason=f'unknown parameter {param.name!r}')
+            if param.name in READ_ONLY:
+                return SetParametersResult(
+                    successful=False, reason=f'{param.name!r} only takes effect at start-up')
+            try:
+                trial[param.name] = check_value(spec, _plain(param.value))
+            except ConfigError as err:
+                return SetParametersResult(successful=False, reason=str(err))
+        try:
+            config = PlaneNodeConfig.from_flat(trial)
+        except ConfigError as err:
+            return SetParametersResult(successful=False, reason=str(err))
+        with self._lock:
+            if config.sync != self.config.sync:
+                self._sync = ApproximateTimeSync(config.sync.slop_s, config.sync.queue_size)
+            self.pipeline.update_config(config)
+            self.config = config
+            self._values = trial
+        self.get_logger().info('parameters updated: ' + ', '.join(p.name for p in params))
+        return SetParametersResult(successful=True)
+
+    # --- Input -----------------------------------------------------------------------------
+    def _on_incompatible_qos(self, side: str, info: Any) -> None:
+        if side in self._qos_warned:
+            return
+        self._qos_warned.add(side)
+        wanted = 'reliable' if self.config.transport.reliable else 'best effort'
+        self.get_logger().warning(
+            f'{side}/image_raw: a publisher offers QoS incompatible with this subscription '
+            f'({wanted}; policy id {getattr(info, "last_policy_kind", "?")}); no images will '
+            'arrive from it. Set qos.reliable to match the camera driver.')
+
+    def _on_image(self, side: str, msg: Image) -> None:
+        with self._lock:
+            pairs = self._sync.add(side, _stamp_ns(msg), msg)
+        for pair in pairs:
+            with self._cv:
+                if self._pending is not None:
+                    self._counters['dropped_busy'] += 1
+                self._pending = pair
+                self._counters['pairs'] += 1
+                self._period_pairs += 1
+                self._cv.notify()
+
+    # --- Processing ----------------------------------------------------------------------
+    def _work(self) -> None:
+        while True:
+            with self._cv:
+                while self._pending is None and not self._stop:
+                    self._cv.wait(0.2)
+                if self._stop:
+                    return
+                pair, self._pending = self._pending, None
+            try:
+                self._process(pair)
+            except Exception as err:  # noqa: B902 - the worker must survive any one frame
+                self._last_error = f'{type(err).__name__}: {err}'
+                self.get_logger().error(f'frame failed: {self._last_error}',
+                                        throttle_duration_sec=_THROTTLE_S)
+
+    def _process(self, pair: Pair) -> None:
+        t0 = time.perf_counter()
+        try:
+            left = message_to_gray(pair.left)
+            right = message_to_gray(pair.right)
+        except ImageDecodeError as err:
+            self._counters['decode_errors'] += 1
+            self._last_error = f'image rejected: {err}'
+            self.get_logger().error(self._last_error, throttle_duration_sec=_THROTTLE_S)
+            return
+        with self._lock:
+            result = self.pipeline.process(left, right, pair.left_stamp_ns,
+                                           reset=pair.after_reset)
+        header = pair.left.header
+        if result.ok:
+            self._pub_h.publish(homography_msg(result.homography))
+            self._counters['consecutive_failures'] = 0
+        else:
+            self._counters['consecutive_failures'] += 1
+            self.get_logger().warning(f'no plane: {result.reason}',
+                                      throttle_duration_sec=_THROTTLE_S)
+        self._pub_mask.publish(image_msg(result.mask, header, 'mono8'))
+        if self._pub_debug.get_subscription_count() > 0:
+            inl = result.estimate.inliers if result.ok else None
+            pts = result.left_points
+            rgb = overlay(left, result.mask, pts[inl] if inl is not None else None,
+                          pts[~inl] if inl is not None else pts)
+            self._pub_debug.publish(image_msg(rgb, header, 'rgb8'))
+        self._latency_ms.append(1e3 * (time.perf_counter() - t0))
+        self._counters['processed'] += 1
+        self._last_result = result
+
+    # --- Diagnostics ---------------------------------------------------------------------
+    def _publish_diagnostics(self) -> None:
+        now = time.monotonic()
+        elapsed = max(now - self._period_start, 1e-6)
+        rate = self._period_pairs / elapsed
+        self._period_pairs = 0
+        self._period_start = now
+        result = self._last_result
+        stats = self._sync.stats()
+        lat = np.array(self._latency_ms) if self._latency_ms else np.zeros(1)
+        failures = self._counters['consecutive_failures']
+        if rate == 0.0:
+            level, message = DiagnosticStatus.WARN, 'no stereo pairs received'
+        elif failures >= _FAILURES_FOR_ERROR:
+            level, message = DiagnosticStatus.ERROR, f'no plane for {failures} pairs: ' + (
+                result.reason if result else '')
+        elif result is not None and not result.ok:
+            level, message = DiagnosticStatus.WARN, f'no plane: {result.reason}'
+        else:
+            level, message = DiagnosticStatus.OK, 'plane ' + self.pipeline.state
+        values = [
+            ('input rate [pairs/s]', f'{rate:.2f}'),
+            ('processing latency median [ms]', f'{np.median(lat):.2f}'),
+            ('processing latency p95 [ms]', f'{np.percentile(lat, 95):.2f}'),
+            ('pairs', self._counters['pairs']),
+            ('processed pairs', self._counters['processed']),
+            ('dropped pairs (busy)', self._counters['dropped_busy']),
+            ('dropped frames (sync)', stats.dropped),
+            ('decode errors', self._counters['decode_errors']),
+            ('lock state', self.pipeline.state),
+            ('inliers', result.n_inliers if result else 0),
+            ('final energy', f'{result.estimate.final_energy:.4g}'
+             if result is not None and result.ok else 'n/a'),
+            ('converged', bool(result.ok and result.estimate.converged) if result else False),
+            ('re-initialisations', self.pipeline.stats.reinitialisations),
+            ('last error', self._last_error or 'none'),
+        ]
+        self._pub_diag.publish(diagnostics_msg(
+            self.get_clock().now().to_msg(), 'plane_node: dominant plane',
+            self.get_fully_qualified_name(), level[0] if isinstance(level, bytes) else level,
+            message, values))
+
+    def destroy_node(self) -> None:
+        """Stop the worker thread, then destroy the node."""
+        with self._cv:
+            self._stop = True
+            self._cv.notify_all()
+        if self._worker.is_alive():
+            self._worker.join(timeout=5.0)
+        super().destroy_node()
+
+
+def _plain(value: Any) -> Any:
+    """Return ROS parameter values as plain Python (array.array -> list)."""
+    if hasattr(value, 'tolist') and not isinstance(value, (str, bytes)):
+        return value.tolist()
+    return value
+
+
+def main(args: list[str] | None = None) -> int:
+    """Run plane_node until Ctrl-C or an external shutdown.
+
+    Returns:
+        0 on a clean shutdown, 2 on an invalid parameter.
+
+    """
+    rclpy.init(args=args)
+    try:
+        node = PlaneNode()
+    except ConfigError as err:
+        print(f'plane_node: {err}', file=sys.stderr)
+        rclpy.try_shutdown()
+        return 2
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+        rclpy.try_shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,259 @@
+"""One object per stereo stream: features, warm start or prior, estimate, mask.
+
+The live node and the offline replay are thin adapters around :class:`PlanePipeline`, so the
+same frames give the same results in both. All state that lives across frames (the last good
+homography, its energy, the lock state, the counters) lives here and nowhere else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+import time
+
+import numpy as np
+
+from domplane_ros.config import PlaneNodeConfig, PriorConfig
+from domplane_ros.estimator import estimate_plane, FailedEstimate, PlaneEstimate
+from domplane_ros.features import detect_corners
+from domplane_ros.homography import apply_homography
+from domplane_ros.mask import plane_mask
+from domplane_ros.prior import prior_candidates
+
+# Lock states reported in diagnostics.
+SEARCHING = 'searching'
+LOCKED = 'locked'
+
+# Margin (fraction of the image diagonal) around the image-corner positions that the prior's
+# candidates reach; a homography moving a corner beyond it violates the prior.
+_PRIOR_BOUNDS_MARGIN = 0.15
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What the pipeline made of one stereo pair.
+
+    Attributes:
+        stamp_ns: The pair's stamp (the left image's), nanoseconds.
+        ok: Whether a plane was found; if not, ``homography`` is None and the mask is all 0.
+        homography: (3, 3) float64 left-to-right homography with ``H[2, 2] == 1``, or None.
+        mask: (H, W) uint8 left-image mask: 255 plane, 127 obstacle, 0 unknown.
+        estimate: The estimator's result (success or failure value).
+        left_points: (N, 2) float64 left corners.
+        right_points: (M, 2) float64 right corners.
+        reinitialised: True if this frame started from the prior or the configured initial
+            homography rather than the last frame's result.
+        reason: Why the frame failed ('' when ok).
+        state: Lock state after this frame: ``'locked'`` or ``'searching'``.
+        timings_ms: Milliseconds spent in ``features``, ``estimate``, ``mask`` and ``total``.
+
+    """
+
+    stamp_ns: int
+    ok: bool
+    homography: np.ndarray | None
+    mask: np.ndarray
+    estimate: PlaneEstimate | FailedEstimate
+    left_points: np.ndarray
+    right_points: np.ndarray
+    reinitialised: bool
+    reason: str
+    state: str
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def n_inliers(self) -> int:
+        """Return the number of inlier left points (0 on failure)."""
+        return self.estimate.n_inliers if self.estimate is not None else 0
+
+
+@dataclass
+class PipelineStats:
+    """Counters since the pipeline was made."""
+
+    frames: int = 0
+    succeeded: int = 0
+    failed: int = 0
+    reinitialisations: int = 0
+    resets: int = 0
+
+
+class PlanePipeline:
+    """Dominant-plane estimation over a stream of stereo pairs.
+
+    Args:
+        config: The whole configuration (the node's parameters).
+
+    """
+
+    def __init__(self, config: PlaneNodeConfig | None = None) -> None:
+        """Start with no warm start: the first frame re-initialises."""
+        self.config = config if config is not None else PlaneNodeConfig()
+        self.stats = PipelineStats()
+        self._last_h: np.ndarray | None = None
+        self._last_energy_per_point: float | None = None
+        self._last_stamp_ns: int | None = None
+        self._last_shape: tuple[tuple[int, int], tuple[int, int]] | None = None
+        self._bounds_cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+
+    @property
+    def last_homography(self) -> np.ndarray | None:
+        """Return the warm start for the next frame, or None (the next frame re-initialises)."""
+        return None if self._last_h is None else self._last_h.copy()
+
+    @property
+    def state(self) -> str:
+        """Return the lock state: ``'locked'`` while a warm start exists."""
+        return LOCKED if self._last_h is not None else SEARCHING
+
+    def update_config(self, config: PlaneNodeConfig) -> None:
+        """Use a new configuration from the next frame on, keeping the warm start.
+
+        A changed prior, initial homography or image ROI drops the warm start.
+        """
+        if (config.prior != self.config.prior
+                or config.initial_homography != self.config.initial_homography):
+            self.reset()
+            self._bounds_cache.clear()
+        self.config = config
+
+    def reset(self) -> None:
+        """Drop the warm start: the next frame re-initialises from the prior."""
+        if self._last_h is not None:
+            self.stats.resets += 1
+        self._last_h = None
+        self._last_energy_per_point = None
+
+    def process(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
+                reset: bool = False) -> FrameResult:
+        """Estimate the plane for one stereo pair.
+
+        Args:
+            left: (H, W) uint8 left grey image.
+            right: (H', W') uint8 right grey image.
+            stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one drops
+                the warm start (clock reset, bag loop).
+            reset: Drop the warm start before this frame.
+
+        Returns:
+            The :class:`FrameResult`; it is never a non-finite homography.
+
+        Raises:
+            ValueError: If an image is not a 2-D uint8 array.
+
+        """
+        t0 = time.perf_counter()
+        for name, img in (('left', left), ('right', right)):
+            if not isinstance(img, np.ndarray) or img.ndim != 2 or img.dtype != np.uint8:
+                raise ValueError(f'{name} image must be a 2-D uint8 array')
+        shapes = (left.shape, right.shape)
+        if (reset or (self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns)
+                or (self._last_shape is not None and shapes != self._last_shape)):
+            self.reset()
+        self._last_stamp_ns = stamp_ns
+        self._last_shape = shapes
+        self.stats.frames += 1
+        cfg = self.config
+        left_pts = detect_corners(left, cfg.features)
+        right_pts = detect_corners(right, cfg.features)
+        t1 = time.perf_counter()
+        height, width = left.shape
+        reinit = self._last_h is None
+        estimate = self._estimate(left_pts, right_pts, (width, height))
+        if estimate.ok and not reinit:
+            reason = self._suspicious(estimate, left_pts.shape[0], (width, height))
+            if reason:
+                # The warm start went astray: start again from the prior in this frame.
+                reinit = True
+                self._last_h = None
+                estimate = self._estimate(left_pts, right_pts, (width, height))
+        elif not estimate.ok and not reinit:
+            reinit = True
+            self._last_h = None
+            estimate = self._estimate(left_pts, right_pts, (width, height))
+        if reinit:
+            self.stats.reinitialisations += 1
+        reason = estimate.reason
+        if estimate.ok:
+            reason = self._suspicious(estimate, left_pts.shape[0], (width, height),
+                                      energy=False)
+        t2 = time.perf_counter()
+        if estimate.ok and not reason:
+            h = estimate.homography
+            mask = plane_mask(left, right, h, cfg.mask)
+            self._last_h = h
+            self._last_energy_per_point = estimate.final_energy / max(left_pts.shape[0], 1)
+            self.stats.succeeded += 1
+            ok = True
+        else:
+            mask = np.zeros(left.shape, np.uint8)
+            self._last_h = None
+            self._last_energy_per_point = None
+            self.stats.failed += 1
+            h = None
+            ok = False
+        t3 = time.perf_counter()
+        timings = {'features': 1e3 * (t1 - t0), 'estimate': 1e3 * (t2 - t1),
+                   'mask': 1e3 * (t3 - t2), 'total': 1e3 * (t3 - t0)}
+        return FrameResult(stamp_ns=stamp_ns, ok=ok, homography=h, mask=mask,
+                           estimate=estimate, left_points=left_pts, right_points=right_pts,
+                           reinitialised=reinit, reason='' if ok else reason,
+                           state=self.state, timings_ms=timings)
+
+    def _estimate(self, left_pts: np.ndarray, right_pts: np.ndarray,
+                  size: tuple[int, int]) -> PlaneEstimate | FailedEstimate:
+        cfg = self.config
+        if left_pts.shape[0] < cfg.estimator.min_inliers:
+            return FailedEstimate(f'too few left features: {left_pts.shape[0]} < '
+                                  f'min_inliers {cfg.estimator.min_inliers}')
+        if right_pts.shape[0] < 4:
+            return FailedEstimate(f'too few right features: {right_pts.shape[0]}')
+        if self._last_h is not None:
+            return estimate_plane(left_pts, right_pts, self._last_h, cfg.estimator)
+        if cfg.initial_homography:
+            first = estimate_plane(left_pts, right_pts, np.array(cfg.initial_homography),
+                                   cfg.estimator)
+            if first.ok and not self._suspicious(first, left_pts.shape[0], size,
+                                                 energy=False):
+                return first
+        return estimate_plane(left_pts, right_pts, None, cfg.estimator, prior=cfg.prior,
+                              image_size=size)
+
+    def _suspicious(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
+                    energy: bool = True) -> str:
+        """Return why an estimate should not be trusted ('' if it can be)."""
+        cfg = self.config.pipeline
+        if energy and self._last_energy_per_point is not None:
+            per_point = estimate.final_energy / max(n_points, 1)
+            limit = cfg.max_energy_ratio * max(self._last_energy_per_point, 1e-3)
+            if per_point > limit:
+                return (f'energy jump: {per_point:.3g} per point > {cfg.max_energy_ratio} x '
+                        f'last {self._last_energy_per_point:.3g}')
+        if cfg.check_prior_bounds:
+            low, high = self._prior_bounds(size)
+            corners = _image_corners(*size)
+            mapped = apply_homography(estimate.homography, corners)
+            if np.any(mapped < low) or np.any(mapped > high):
+                return 'homography outside the prior: an image corner maps beyond its range'
+        return ''
+
+    def _prior_bounds(self, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        if size not in self._bounds_cache:
+            cands = prior_candidates(_bounds_prior(self.config.prior), *size)
+            corners = _image_corners(*size)
+            mapped = np.stack([apply_homography(h, corners) for h in cands])
+            margin = _PRIOR_BOUNDS_MARGIN * float(np.hypot(*size))
+            self._bounds_cache[size] = (mapped.min(axis=0) - margin,
+                                        mapped.max(axis=0) + margin)
+        return self._bounds_cache[size]
+
+
+def _bounds_prior(prior: PriorConfig) -> PriorConfig:
+    """Return the prior sampled at its range ends and middle, for the bounds check."""
+    from dataclasses import replace
+
+    return replace(prior, samples=3)
+
+
+def _image_corners(width: int, height: int) -> np.ndarray:
+    return np.array([[0.0, 0.0], [width - 1.0, 0.0], [width - 1.0, height - 1.0],
+                     [0.0, height - 1.0]])
