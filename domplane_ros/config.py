@@ -120,6 +120,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('pipeline.max_energy_ratio', 4.0, 'float',
               'A warm-started estimate whose energy per point exceeds this multiple of the '
               'last good one triggers a re-initialisation from the prior.', 1.0, 1e6),
+    ParamSpec('pipeline.warm_gnc_start_px', 6.0, 'float',
+              'Geman-McClure only: initial GNC scale when warm-starting from the last frame '
+              '(the wide estimator.gnc_start_px is used after a re-initialisation).',
+              0.1, 500.0),
     ParamSpec('pipeline.check_prior_bounds', True, 'bool',
               'Reject homographies that move the image corners outside what the prior allows.'),
     # Synchroniser and transport.
@@ -319,6 +323,7 @@ class PipelineConfig:
     """Frame-to-frame policy (see ``pipeline.*`` in :data:`PARAMETERS`)."""
 
     max_energy_ratio: float = 4.0
+    warm_gnc_start_px: float = 6.0
     check_prior_bounds: bool = True
 
     def __post_init__(self) -> None:

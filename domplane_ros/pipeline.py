@@ -7,7 +7,7 @@ homography, its energy, the lock state, the counters) lives here and nowhere els
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import time
 
 import numpy as np
@@ -208,7 +208,9 @@ class PlanePipeline:
         if right_pts.shape[0] < 4:
             return FailedEstimate(f'too few right features: {right_pts.shape[0]}')
         if self._last_h is not None:
-            return estimate_plane(left_pts, right_pts, self._last_h, cfg.estimator)
+            warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
+                                                           cfg.pipeline.warm_gnc_start_px))
+            return estimate_plane(left_pts, right_pts, self._last_h, warm)
         if cfg.initial_homography:
             first = estimate_plane(left_pts, right_pts, np.array(cfg.initial_homography),
                                    cfg.estimator)
@@ -249,8 +251,6 @@ class PlanePipeline:
 
 def _bounds_prior(prior: PriorConfig) -> PriorConfig:
     """Return the prior sampled at its range ends and middle, for the bounds check."""
-    from dataclasses import replace
-
     return replace(prior, samples=3)
 
 
