@@ -7,7 +7,8 @@ local maxima above ``quality_level`` times the strongest response that are also 
 within ``min_distance_px``, and then takes corners round-robin over the grid cells: first the
 best corner of every cell, then the second best, and so on. Every cell thus gets an equal
 share of ``max_points``, and cells with too few corners give the rest of their share to the
-others. The chosen corners are refined to sub-pixel accuracy by ``cv2.cornerSubPix``.
+others. The chosen corners are refined to sub-pixel accuracy (a parabola fit of the response
+peak, then ``cv2.cornerSubPix``).
 """
 
 from __future__ import annotations
@@ -23,7 +24,8 @@ from domplane_ros.config import FeatureConfig
 # Corner responses at or below this are noise-free flat image regions (cv2.cornerMinEigenVal
 # normalises gradients of 8-bit images to [0, 1], so a one-grey-level step is ~1e-6).
 _MIN_RESPONSE = 1e-7
-_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 10, 0.03)
+# Three iterations are enough: the start is within a pixel of the corner (measured).
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 3, 0.1)
 
 
 def _check_image(gray: np.ndarray) -> None:
@@ -112,9 +114,13 @@ def detect_corners(gray: np.ndarray, config: FeatureConfig,
     radius = max(1, int(round(config.min_distance_px)))
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * radius + 1, 2 * radius + 1))
     peaks = cv2.dilate(response, kernel)[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
-    ys, xs = np.nonzero((inner >= peaks) & (inner > threshold))
-    if ys.size == 0:
+    keep = cv2.bitwise_and(cv2.compare(inner, peaks, cv2.CMP_GE),
+                           cv2.compare(inner, threshold, cv2.CMP_GT))
+    found = cv2.findNonZero(keep)
+    if found is None:
         return empty
+    found = found.reshape(-1, 2).astype(np.int64)  # (N, 2) or (N, 1, 2) by cv2 version
+    xs, ys = found[:, 0], found[:, 1]
     strength = inner[ys, xs]
     # Round-robin over the grid cells: rank each corner within its cell by strength, then
     # take rank 0 of every cell, then rank 1, ... (ties by strength).
@@ -127,14 +133,31 @@ def detect_corners(gray: np.ndarray, config: FeatureConfig,
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size) - first
     chosen = np.lexsort((-strength, rank))[:config.max_points]
-    corners = np.stack([xs[chosen] + lo_x, ys[chosen] + lo_y], axis=1).astype(np.float32)
-    half = max(1, block // 2)
-    cv2.cornerSubPix(gray, corners.reshape(-1, 1, 2), (half, half), (-1, -1),
-                     _SUBPIX_CRITERIA)
-    corners = corners.astype(np.float64)
-    # cornerSubPix can drift on blurry or edge-like corners; keep the integer peak there.
-    start = np.stack([xs[chosen] + lo_x, ys[chosen] + lo_y], axis=1).astype(np.float64)
-    drifted = np.any(np.abs(corners - start) > half, axis=1) | ~np.all(
-        np.isfinite(corners), axis=1)
-    corners[drifted] = start[drifted]
-    return corners
+    ys, xs = ys[chosen], xs[chosen]
+    # Sub-pixel refinement, first the vertex of a parabola through the response peak and its
+    # neighbours along x and y (free), then cv2.cornerSubPix (a few iterations). The parabola
+    # alone is biased at X-junctions (tiles, checkers), where the response has two peaks
+    # beside the junction; cornerSubPix moves to the saddle point. Where cornerSubPix leaves
+    # its window (blurry, edge-like corners) the parabola vertex is kept.
+    ry, rx = ys + (lo_y - cy0), xs + (lo_x - cx0)
+    centre = response[ry, rx].astype(np.float64)
+    offsets = []
+    for before, after in ((response[ry, rx - 1], response[ry, rx + 1]),
+                          (response[ry - 1, rx], response[ry + 1, rx])):
+        curvature = before - 2.0 * centre + after
+        step = 0.5 * (before - after) / np.where(curvature < -1e-20, curvature, -np.inf)
+        offsets.append(np.clip(step, -0.5, 0.5))
+    low = np.array([lo_x, lo_y], np.float64)
+    high = np.array([hi_x - 1, hi_y - 1], np.float64)
+    peak = np.clip(np.stack([xs + lo_x + offsets[0], ys + lo_y + offsets[1]], axis=1), low,
+                   high)
+    # cornerSubPix needs the window plus a margin inside the image.
+    half = min(max(2, block), (width - 6) // 2, (height - 6) // 2)
+    if half < 1:
+        return peak
+    refined = cv2.cornerSubPix(gray, peak.astype(np.float32).reshape(-1, 1, 2), (half, half),
+                               (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+    good = (np.all(np.isfinite(refined), axis=1)
+            & np.all(np.abs(refined - peak) <= half, axis=1)
+            & np.all((refined >= low) & (refined <= high), axis=1))
+    return np.where(good[:, None], refined, peak)
