@@ -15,11 +15,6 @@ PYTEST_TIMEOUT_S ?= 300
 # own random domain).
 export ROS_AUTOMATIC_DISCOVERY_RANGE := LOCALHOST
 export ROS_DOMAIN_ID ?= $(shell echo $$(( RANDOM % 200 + 1 )))
-# The source tree wins over the copy installed in .venv, so edits need no reinstall to test.
-RUN := PYTHONPATH=$(CURDIR)$${PYTHONPATH:+:$$PYTHONPATH} $(VPY)
-
-PACKAGE_FILES := setup.py setup.cfg package.xml $(wildcard resource/* config/*.yaml scripts/*) \
-	$(wildcard domplane_ros/*.py)
 
 .PHONY: venv test lint demo bench clean
 
@@ -31,25 +26,26 @@ $(VENV)/.stamp: requirements.txt
 	$(VPY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
 	touch $@
 
-# The package itself, as a normal (non-editable) install: setuptools' editable installs do not
-# install data_files (ament index marker, package.xml, config, lib/domplane_ros launchers).
-$(VENV)/.installed: $(VENV)/.stamp $(PACKAGE_FILES)
+# The package itself, editable, so the console scripts in .venv/bin (plane_node, plane_replay)
+# run the work tree's code. Editable installs skip data_files (ament index marker, share/,
+# lib/domplane_ros launchers); test/test_install_tree.py checks those with a real install.
+$(VENV)/.installed: $(VENV)/.stamp setup.py setup.cfg
 	$(VPY) -m pip install --quiet --disable-pip-version-check --no-deps --no-build-isolation \
-		--force-reinstall .
+		-e .
 	touch $@
 
 test: venv
-	$(RUN) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) test
+	$(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) test
 
 lint: venv
-	$(RUN) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) test/test_flake8.py test/test_pep257.py
+	$(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) test/test_flake8.py test/test_pep257.py
 
 demo: venv
-	$(RUN) -m domplane_ros.demo --output demo_output
+	$(VPY) -m domplane_ros.demo --output demo_output
 
 bench: venv
-	$(RUN) -m domplane_ros.bench
+	$(VPY) -m domplane_ros.bench
 
 clean:
-	rm -rf $(VENV) build domplane_ros.egg-info .pytest_cache .hypothesis demo_output \
+	rm -rf $(VENV) domplane_ros.egg-info .pytest_cache .hypothesis demo_output \
 		bench_output eval_output

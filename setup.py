@@ -29,7 +29,7 @@ setup(
         'Dominant ground plane homography from a stereo pair without correspondences.'),
     license='Apache-2.0',
     python_requires='>=3.10',
-    tests_require=['pytest'],
+    extras_require={'test': ['pytest', 'hypothesis']},
     entry_points={
         'console_scripts': [
             'plane_node = domplane_ros.node:main',

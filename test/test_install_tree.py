@@ -18,7 +18,10 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = 'domplane_ros'
-SOURCE_ITEMS = ('setup.py', 'setup.cfg', 'package.xml', 'resource', 'config', 'scripts', PACKAGE)
+# Work-tree folders that are no part of the source (virtual environment, build trees, outputs).
+NOT_SOURCE = shutil.ignore_patterns(
+    '.git', '.venv', '.hypothesis', '.pytest_cache', '__pycache__', '*.egg-info', 'build',
+    'install', 'log', 'demo_output', 'bench_output', 'eval_output')
 LAUNCHERS = ('plane_node', 'plane_replay')
 
 
@@ -37,13 +40,7 @@ def install_prefix(tmp_path_factory) -> Path:
     """
     root = tmp_path_factory.mktemp('install_tree')
     source, prefix = root / 'src', root / 'prefix'
-    source.mkdir()
-    for item in SOURCE_ITEMS:
-        path = REPO_ROOT / item
-        if path.is_dir():
-            shutil.copytree(path, source / item, ignore=shutil.ignore_patterns('__pycache__'))
-        else:
-            shutil.copy2(path, source / item)
+    shutil.copytree(REPO_ROOT, source, ignore=NOT_SOURCE)
     command = [
         sys.executable, '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check',
         '--no-deps', '--no-build-isolation', '--no-index', '--prefix', str(prefix), str(source),
