@@ -15,24 +15,23 @@ thread, names the machine, and prints for 300, 500 and 1000 points per view (30 
 
 from __future__ import annotations
 
+import argparse
 import os
+import platform
+import sys
+import time
 
 for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(_var, '1')
 
-import argparse  # noqa: E402
-import platform  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-
 import cv2  # noqa: E402
-import numpy as np  # noqa: E402
-
 from domplane_ros.config import EstimatorConfig, PriorConfig  # noqa: E402
 from domplane_ros.estimator import estimate_plane  # noqa: E402
+from domplane_ros.homography import apply_homography  # noqa: E402
 from domplane_ros.potentials import POTENTIALS  # noqa: E402
 from domplane_ros.synthetic import (displace_homography, plane_error_px,  # noqa: E402
                                     point_scene)
+import numpy as np  # noqa: E402
 
 
 def machine_name() -> str:
@@ -83,7 +82,6 @@ def bench_speed(n_points: int, runs: int, potential: str) -> None:
         warm_ok += est.ok and plane_error_px(est.homography, scene.homography, truth) < 1.0
         # Oracle baseline on the same data: the true correspondences, MAGSAC.
         src = scene.left.astype(np.float32)
-        from domplane_ros.homography import apply_homography
         dst = (apply_homography(scene.homography, scene.left)
                + rng.normal(0, 0.3, scene.left.shape)).astype(np.float32)
         off = ~scene.on_plane

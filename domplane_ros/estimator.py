@@ -24,15 +24,14 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import numpy as np
-from scipy.spatial import cKDTree
-
 from domplane_ros.config import EstimatorConfig, PriorConfig
 from domplane_ros.homography import (apply_homography, as_homography, as_points,
-                                     check_homography, count_distinct, FailedEstimation, NormalisedRefiner,
-                                     normalise_scale)
+                                     check_homography, count_distinct, FailedEstimation,
+                                     normalise_scale, NormalisedRefiner)
 from domplane_ros.potentials import make_potential, Potential
 from domplane_ros.prior import prior_candidates, screen_candidates
+import numpy as np
+from scipy.spatial import cKDTree
 
 _GLOBAL_STEP_ITERATIONS = 2
 _POLISH_ROUNDS = 2

@@ -15,19 +15,6 @@ import time
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-import numpy as np
-import rclpy
-from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterException)
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-from rclpy.node import Node
-from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
-from rcl_interfaces.msg import SetParametersResult
-from sensor_msgs.msg import Image
-from std_msgs.msg import Float64MultiArray
-
 from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
                                  PlaneNodeConfig)
 from domplane_ros.errors import ImageDecodeError
@@ -37,6 +24,18 @@ from domplane_ros.pipeline import FrameResult, PlanePipeline
 from domplane_ros.ros_io import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros_io import READ_ONLY
 from domplane_ros.sync import ApproximateTimeSync, Pair
+import numpy as np
+from rcl_interfaces.msg import SetParametersResult
+import rclpy
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
+                              ParameterException)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
+from sensor_msgs.msg import Image
+from std_msgs.msg import Float64MultiArray
 
 _EMPTY_ARRAY_KINDS = {'floats': Parameter.Type.DOUBLE_ARRAY}
 _THROTTLE_S = 5.0

@@ -10,14 +10,13 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 import time
 
-import numpy as np
-
 from domplane_ros.config import PlaneNodeConfig, PriorConfig
 from domplane_ros.estimator import estimate_plane, FailedEstimate, PlaneEstimate
 from domplane_ros.features import detect_corners
 from domplane_ros.homography import apply_homography
 from domplane_ros.mask import plane_mask
 from domplane_ros.prior import prior_candidates
+import numpy as np
 
 # Lock states reported in diagnostics.
 SEARCHING = 'searching'

@@ -23,9 +23,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
-    from scipy.spatial import cKDTree
-
     from domplane_ros.config import PriorConfig
+    from scipy.spatial import cKDTree
 
 
 def plane_homography(focal_px: float, baseline_over_height: float, tilt_deg: float,
@@ -83,7 +82,7 @@ def _samples(bounds: tuple[float, float], count: int) -> np.ndarray:
     return np.linspace(low, high, count)
 
 
-def prior_candidates(prior: 'PriorConfig', width: int, height: int) -> np.ndarray:
+def prior_candidates(prior: PriorConfig, width: int, height: int) -> np.ndarray:
     """Return candidate homographies on a grid over the camera set-up ranges.
 
     Each range gets ``prior.samples`` evenly spaced values (one, its middle, if it is a
@@ -112,7 +111,7 @@ def prior_candidates(prior: 'PriorConfig', width: int, height: int) -> np.ndarra
     return np.stack(out)
 
 
-def screen_candidates(candidates: np.ndarray, left_points: np.ndarray, right_tree: 'cKDTree',
+def screen_candidates(candidates: np.ndarray, left_points: np.ndarray, right_tree: cKDTree,
                       threshold_px: float) -> np.ndarray:
     """Score candidates by a cheap truncated closest-point energy (lower is better).
 

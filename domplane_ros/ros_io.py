@@ -5,14 +5,13 @@ from __future__ import annotations
 from typing import Any, Iterable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rcl_interfaces.msg import ParameterType
-import numpy as np
-from sensor_msgs.msg import Image
-from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
-
 from domplane_ros.config import ParamSpec
 from domplane_ros.image import gray_to_image_fields, rgb_to_image_fields
+import numpy as np
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterType
+from sensor_msgs.msg import Image
+from std_msgs.msg import Float64MultiArray, Header, MultiArrayDimension
 
 _TYPES = {
     'bool': ParameterType.PARAMETER_BOOL,
@@ -28,7 +27,7 @@ READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s'})
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    """Return the ROS parameter descriptor (description, type, range) of a parameter spec."""
+    """Build the ROS parameter descriptor (description, type, range) of a parameter spec."""
     desc = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                                description=spec.description,
                                read_only=spec.name in READ_ONLY)
@@ -50,7 +49,7 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
 
 
 def homography_msg(matrix: np.ndarray) -> Float64MultiArray:
-    """Return a 3x3 row-major Float64MultiArray (dims rows=3, cols=3), ``H[2][2] == 1``."""
+    """Build the 3x3 row-major Float64MultiArray (dims rows=3, cols=3), ``H[2][2] == 1``."""
     msg = Float64MultiArray()
     msg.layout.dim = [MultiArrayDimension(label='rows', size=3, stride=9),
                       MultiArrayDimension(label='cols', size=3, stride=3)]

@@ -11,10 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
 from domplane_ros.homography import apply_homography, fit_homography_dlt
 from domplane_ros.prior import plane_homography
+import numpy as np
 
 
 @dataclass(frozen=True)

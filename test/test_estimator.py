@@ -33,7 +33,7 @@ def _circle_points():
 def test_paper_a_truncated_recovers_identity_least_squares_does_not(init):
     pts = _circle_points()
     h0 = _similarity(*init)
-    opts = dict(threshold_px=20.0, lambda_weight=0.6, min_inliers=4)
+    opts = {'threshold_px': 20.0, 'lambda_weight': 0.6, 'min_inliers': 4}
     robust = estimate_plane(pts, pts, h0, potential='truncated_quadratic', **opts)
     assert robust.ok
     assert np.abs(apply_homography(robust.homography, pts) - pts).max() < 1e-3
@@ -53,7 +53,8 @@ def test_paper_b_robust_flags_off_plane_point_least_squares_is_biased(seed):
     right[7, 0] -= 40.0
     h0 = displace_homography(h, 3.0, rng)
     on_plane = np.delete(left, 7, axis=0)
-    opts = dict(threshold_px=5.0, lambda_weight=0.6, min_inliers=4, euclidean_refinement=False)
+    opts = {'threshold_px': 5.0, 'lambda_weight': 0.6, 'min_inliers': 4,
+            'euclidean_refinement': False}
     for name in ('truncated_quadratic', 'geman_mcclure'):
         robust = estimate_plane(left, right, h0, potential=name, **opts)
         assert robust.ok
