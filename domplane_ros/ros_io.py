@@ -27,7 +27,7 @@ READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s'})
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
-    """Build the ROS parameter descriptor (description, type, range) of a parameter spec."""
+    """Build the ROS ParameterDescriptor of a spec: description, type, range."""
     desc = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                                description=spec.description,
                                read_only=spec.name in READ_ONLY)
