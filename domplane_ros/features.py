@@ -17,9 +17,8 @@ import math
 from typing import Sequence
 
 import cv2
-import numpy as np
-
 from domplane_ros.config import FeatureConfig
+import numpy as np
 
 # Corner responses at or below this are noise-free flat image regions (cv2.cornerMinEigenVal
 # normalises gradients of 8-bit images to [0, 1], so a one-grey-level step is ~1e-6).
@@ -114,8 +113,10 @@ def detect_corners(gray: np.ndarray, config: FeatureConfig,
     radius = max(1, int(round(config.min_distance_px)))
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * radius + 1, 2 * radius + 1))
     peaks = cv2.dilate(response, kernel)[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
-    keep = cv2.bitwise_and(cv2.compare(inner, peaks, cv2.CMP_GE),
-                           cv2.compare(inner, threshold, cv2.CMP_GT))
+    # (cv2.compare takes a 1 x 1 array for a scalar, hence numpy for that size.)
+    above = (cv2.compare(inner, threshold, cv2.CMP_GT) if inner.size > 1
+             else (inner > threshold).astype(np.uint8) * 255)
+    keep = cv2.bitwise_and(cv2.compare(inner, peaks, cv2.CMP_GE), above)
     found = cv2.findNonZero(keep)
     if found is None:
         return empty

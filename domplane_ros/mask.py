@@ -19,9 +19,8 @@ import math
 from typing import Any
 
 import cv2
-import numpy as np
-
 from domplane_ros.config import MaskConfig
+import numpy as np
 
 PLANE = 255
 OBSTACLE = 127
@@ -226,7 +225,8 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
         raise ValueError(f'mask shape {mask.shape} differs from image shape {gray.shape}')
     rgb = cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
     for value, colour in ((PLANE, _PLANE_RGB), (OBSTACLE, _OBSTACLE_RGB)):
-        region = cv2.compare(mask, value, cv2.CMP_EQ)
+        region = (mask == value).astype(np.uint8) if mask.size == 1 else cv2.compare(
+            mask, value, cv2.CMP_EQ)  # cv2.compare takes a 1 x 1 array for a scalar
         if cv2.countNonZero(region):
             tinted = cv2.addWeighted(rgb, 1.0 - _TINT_ALPHA, np.full_like(rgb, colour),
                                      _TINT_ALPHA, 0.0)

@@ -30,9 +30,8 @@ import math
 from typing import Sequence
 
 import cv2
-import numpy as np
-
 from domplane_ros import prior
+import numpy as np
 
 FLOOR_KINDS = ('random', 'tiles', 'planks', 'checker')
 BACKGROUNDS = ('horizon', 'wall')

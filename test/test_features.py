@@ -3,15 +3,14 @@
 from __future__ import annotations
 
 import cv2
+from domplane_ros import features
+from domplane_ros import scene
+from domplane_ros.config import FeatureConfig
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
-
-from domplane_ros import features
-from domplane_ros import scene
-from domplane_ros.config import FeatureConfig
 
 CONFIG = FeatureConfig()
 

@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import cv2
+from domplane_ros import mask
+from domplane_ros import scene
+from domplane_ros.config import MaskConfig
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
 import pytest
-
-from domplane_ros import mask
-from domplane_ros import scene
-from domplane_ros.config import MaskConfig
 
 CONFIG = MaskConfig()
 SHIFT_15PX = np.array([[1.0, 0.0, 15.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
@@ -193,6 +192,8 @@ def test_overlay_tints_and_draws_points():
     assert np.any((inlier_px[:, 1] > 150) & (inlier_px[:, 2] > 150) & (inlier_px[:, 0] < 120))
     assert np.any((outlier_px[:, 0] > 150) & (outlier_px[:, 2] > 150) & (outlier_px[:, 1] < 120))
     assert mask.overlay(gray, labels, inliers=np.zeros((0, 2))).shape == (60, 80, 3)
+    tiny = mask.overlay(np.full((1, 1), 7, np.uint8), np.full((1, 1), mask.PLANE, np.uint8))
+    assert tiny.shape == (1, 1, 3) and tiny[0, 0, 1] > tiny[0, 0, 0]
     with pytest.raises(ValueError, match='shape'):
         mask.overlay(gray, labels[:, :10])
     with pytest.raises(ValueError, match='inliers'):

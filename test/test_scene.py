@@ -3,11 +3,10 @@
 from __future__ import annotations
 
 import cv2
-import numpy as np
-import pytest
-
 from domplane_ros import prior
 from domplane_ros import scene
+import numpy as np
+import pytest
 
 SETUP = scene.CameraSetup(focal_px=320.0, baseline_over_height=0.2, tilt_deg=30.0,
                           vergence_deg=1.0, width=320, height=240)
