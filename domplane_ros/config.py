@@ -59,7 +59,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Region of interest in the left image as fractions [x0, y0, x1, y1] '
               '(0..1, x0 < x1, y0 < y1).', 0.0, 1.0, lengths=(4,)),
     # Estimator.
-    ParamSpec('estimator.potential', 'geman_mcclure', 'str',
+    ParamSpec('estimator.potential', 'truncated_quadratic', 'str',
               'Robust potential: least_squares, truncated_quadratic, huber or '
               'geman_mcclure (graduated non-convexity).', choices=POTENTIAL_NAMES),
     ParamSpec('estimator.lambda_weight', 0.8, 'float',
@@ -96,9 +96,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('prior.vergence_deg', [-2.0, 4.0], 'range',
               "Vergence: the right camera's yaw toward the left camera, [min, max] degrees.",
               -45.0, 45.0),
-    ParamSpec('prior.samples', 4, 'int',
+    ParamSpec('prior.samples', 5, 'int',
               'Samples per prior range for the candidate grid (samples^4 candidates).', 1, 12),
-    ParamSpec('prior.refine_best', 3, 'int',
+    ParamSpec('prior.refine_best', 6, 'int',
               'Candidates (best by screening energy) that get the full iteration.', 1, 100),
     ParamSpec('prior.screen_threshold_px', 12.0, 'float',
               'Truncation of the cheap closest-point screening energy, in pixels.', 0.5, 500.0),
@@ -270,7 +270,7 @@ class FeatureConfig:
 class EstimatorConfig:
     """Two-step iteration settings (see ``estimator.*`` in :data:`PARAMETERS`)."""
 
-    potential: str = 'geman_mcclure'
+    potential: str = 'truncated_quadratic'
     lambda_weight: float = 0.8
     threshold_px: float = 3.0
     gnc_start_px: float = 24.0
@@ -294,8 +294,8 @@ class PriorConfig:
     baseline_over_height: tuple[float, float] = (0.05, 0.4)
     tilt_deg: tuple[float, float] = (10.0, 50.0)
     vergence_deg: tuple[float, float] = (-2.0, 4.0)
-    samples: int = 4
-    refine_best: int = 3
+    samples: int = 5
+    refine_best: int = 6
     screen_threshold_px: float = 12.0
 
     def __post_init__(self) -> None:

@@ -167,7 +167,7 @@ def test_geman_mcclure_basin_at_20_px():
         rng = np.random.default_rng(1000 + seed)
         scene = point_scene(rng, 500)
         h0 = displace_homography(scene.homography, 20.0, rng)
-        est = estimate_plane(scene.left, scene.right, h0)
+        est = estimate_plane(scene.left, scene.right, h0, potential='geman_mcclure')
         ok += est.ok and plane_error_px(est.homography, scene.homography,
                                         scene.left[scene.on_plane]) < 1.0
     assert ok >= 19

@@ -165,8 +165,9 @@ def test_runtime_parameter_changes_are_validated(ros_context, scene):
         assert not res.successful and 'features.roi' in res.reason
         res = node.set_parameters([Parameter('qos.depth', value=3)])[0]
         assert not res.successful
-        assert node.config.estimator.potential == 'geman_mcclure'
-        assert node.get_parameter('estimator.potential').value == 'geman_mcclure'
+        assert node.config.estimator.potential == 'truncated_quadratic'
+        assert node.get_parameter('estimator.potential').value == 'truncated_quadratic'
+        assert node.config.prior.tilt_deg[0] < node.config.prior.tilt_deg[1]
         res = node.set_parameters([Parameter('estimator.potential', value='huber'),
                                    Parameter('sync.slop_s', value=0.02)])
         assert all(r.successful for r in res)
