@@ -297,7 +297,7 @@ def _pyramid(texture: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(levels)
 
 
-@functools.lru_cache(maxsize=16)
+@functools.lru_cache(maxsize=8)  # ~22 MB per floor pyramid, ~60 ms to rebuild
 def _texture_pyramid(name: str, variant: int) -> tuple[np.ndarray, ...]:
     if name == 'box':
         return _pyramid(_box_texture(variant))
