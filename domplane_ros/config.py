@@ -110,7 +110,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),
     ParamSpec('mask.window_px', 7, 'int',
               'Side of the window of the normalised comparison, pixels at mask scale.', 3, 31),
-    ParamSpec('mask.ncc_threshold', 0.5, 'float',
+    ParamSpec('mask.ncc_threshold', 0.8, 'float',
               'Local normalised correlation above which a pixel is on the plane.', -1.0, 1.0),
     ParamSpec('mask.min_texture', 3.0, 'float',
               'Local grey-level standard deviation below which a pixel is unknown.', 0.0, 255.0),
@@ -309,7 +309,7 @@ class MaskConfig:
 
     scale: float = 0.5
     window_px: int = 7
-    ncc_threshold: float = 0.5
+    ncc_threshold: float = 0.8
     min_texture: float = 3.0
     morph_px: int = 5
 
