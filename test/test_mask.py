@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import cv2
 from domplane_ros import mask
 from domplane_ros import scene
@@ -120,7 +122,10 @@ def test_right_image_of_another_size(frames):
     # A smaller right image works too.
     small = cv2.resize(frame.right, (width // 2, height // 2), interpolation=cv2.INTER_AREA)
     to_small = np.array([[0.5, 0.0, -0.25], [0.0, 0.5, -0.25], [0.0, 0.0, 1.0]])
-    labels = mask.plane_mask(frame.left, small, to_small @ frame.homography, CONFIG)
+    # Half the resolution lowers the correlation: this check (of the size handling, not of the
+    # threshold) uses the threshold it was measured with.
+    lenient = dataclasses.replace(CONFIG, ncc_threshold=0.5)
+    labels = mask.plane_mask(frame.left, small, to_small @ frame.homography, lenient)
     assert _scores(frame, labels)['plane_iou'] > 0.5
 
 
