@@ -44,8 +44,8 @@ demo: venv
 	$(VPY) -m domplane_ros.demo --output demo_output
 
 bench: venv
-	$(RUN) -m domplane_ros.bench
-	$(RUN) -m domplane_ros.bench_pipeline
+	$(VPY) -m domplane_ros.bench
+	$(VPY) -m domplane_ros.bench_pipeline
 
 clean:
 	rm -rf $(VENV) domplane_ros.egg-info .pytest_cache .hypothesis demo_output \
