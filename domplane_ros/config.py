@@ -75,7 +75,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Geman-McClure only: factor by which the scale shrinks per stage.', 0.05, 0.95),
     ParamSpec('estimator.max_iterations', 60, 'int',
               'Iteration cap of one two-step run (per GNC stage).', 1, 10000),
-    ParamSpec('estimator.tolerance_px', 0.01, 'float',
+    ParamSpec('estimator.tolerance_px', 0.05, 'float',
               'Convergence when no prediction moves more than this, in pixels.', 1e-6, 10.0),
     ParamSpec('estimator.energy_tolerance', 1e-7, 'float',
               'Convergence when the relative energy decrease falls below this.', 0.0, 1.0),
@@ -276,7 +276,7 @@ class EstimatorConfig:
     gnc_start_px: float = 24.0
     gnc_factor: float = 0.5
     max_iterations: int = 60
-    tolerance_px: float = 0.01
+    tolerance_px: float = 0.05
     energy_tolerance: float = 1e-7
     euclidean_refinement: bool = True
     min_inliers: int = 12
