@@ -451,3 +451,25 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
     node_keys = [kv.key for kv in diagnostics[-1].status[0].values]
     replay_diag = read_bag(tmp_path / 'out')['messages']['/diagnostics'][-1][1]
     assert [kv.key for kv in replay_diag.status[0].values] == node_keys
+
+
+def test_demo_writes_its_outputs(tmp_path, capsys):
+    from domplane_ros.demo import DEMO_OUTPUTS, main as demo_main
+
+    out = tmp_path / 'demo'
+    out.mkdir()
+    (out / 'notes.txt').write_text('not from the demo')
+    (out / 'overlay.png').write_text('stale')
+    argv = ['--output', str(out), '--frames', '4', '--width', '192', '--height', '144']
+    assert demo_main(argv) == 0
+    printed = capsys.readouterr().out
+    assert 'Refreshing the previous demo outputs' in printed
+    assert 'plane found in' in printed and 'mean transfer error' in printed
+    assert (out / 'notes.txt').read_text() == 'not from the demo'
+    for name in DEMO_OUTPUTS:
+        assert (out / name).exists(), name
+    assert cv2.imread(str(out / 'overlay.png')).shape[1] == 192
+    assert cv2.imread(str(out / 'contact_sheet.png')) is not None
+    assert cv2.imread(str(out / 'energy_inliers.png')) is not None
+    bag = read_bag(out / 'plane_bag')
+    assert len(bag['messages']['/plane/mask']) == 4
