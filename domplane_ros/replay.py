@@ -979,7 +979,7 @@ def main(argv: list[str] | None = None) -> int:
         _error(str(err))
         return EXIT_REFUSED
     except OSError as err:
-        _error(f'{_describe_error(err)}; the partial output was removed')
+        _error(f'{_describe_error(err)} (no output bag was written)')
         return EXIT_FAILED
     except KeyboardInterrupt:
         _error('interrupted; the partial output was removed')
