@@ -14,9 +14,10 @@ import threading
 import time
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
                                  PlaneNodeConfig)
+from domplane_ros.diagnostics import plane_status, STATUS_NAME
 from domplane_ros.errors import ImageDecodeError
 from domplane_ros.image import message_to_gray
 from domplane_ros.mask import overlay
@@ -24,7 +25,6 @@ from domplane_ros.pipeline import FrameResult, PlanePipeline
 from domplane_ros.ros_io import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros_io import READ_ONLY
 from domplane_ros.sync import ApproximateTimeSync, Pair
-import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -39,7 +39,6 @@ from std_msgs.msg import Float64MultiArray
 
 _EMPTY_ARRAY_KINDS = {'floats': Parameter.Type.DOUBLE_ARRAY}
 _THROTTLE_S = 5.0
-_FAILURES_FOR_ERROR = 3
 
 
 def _stamp_ns(msg: Any) -> int:
@@ -235,40 +234,18 @@ class PlaneNode(Node):
         rate = self._period_pairs / elapsed
         self._period_pairs = 0
         self._period_start = now
-        result = self._last_result
-        stats = self._sync.stats()
-        lat = np.array(self._latency_ms) if self._latency_ms else np.zeros(1)
-        failures = self._counters['consecutive_failures']
-        if rate == 0.0:
-            level, message = DiagnosticStatus.WARN, 'no stereo pairs received'
-        elif failures >= _FAILURES_FOR_ERROR:
-            level, message = DiagnosticStatus.ERROR, f'no plane for {failures} pairs: ' + (
-                result.reason if result else '')
-        elif result is not None and not result.ok:
-            level, message = DiagnosticStatus.WARN, f'no plane: {result.reason}'
-        else:
-            level, message = DiagnosticStatus.OK, 'plane ' + self.pipeline.state
-        values = [
-            ('input rate [pairs/s]', f'{rate:.2f}'),
-            ('processing latency median [ms]', f'{np.median(lat):.2f}'),
-            ('processing latency p95 [ms]', f'{np.percentile(lat, 95):.2f}'),
-            ('pairs', self._counters['pairs']),
-            ('processed pairs', self._counters['processed']),
-            ('dropped pairs (busy)', self._counters['dropped_busy']),
-            ('dropped frames (sync)', stats.dropped),
-            ('decode errors', self._counters['decode_errors']),
-            ('lock state', self.pipeline.state),
-            ('inliers', result.n_inliers if result else 0),
-            ('final energy', f'{result.estimate.final_energy:.4g}'
-             if result is not None and result.ok else 'n/a'),
-            ('converged', bool(result.ok and result.estimate.converged) if result else False),
-            ('re-initialisations', self.pipeline.stats.reinitialisations),
-            ('last error', self._last_error or 'none'),
-        ]
+        level, message, values = plane_status(
+            rate=rate, latencies_ms=list(self._latency_ms), pairs=self._counters['pairs'],
+            processed=self._counters['processed'],
+            dropped_busy=self._counters['dropped_busy'],
+            dropped_sync=self._sync.stats().dropped,
+            decode_errors=self._counters['decode_errors'], lock_state=self.pipeline.state,
+            reinitialisations=self.pipeline.stats.reinitialisations,
+            consecutive_failures=self._counters['consecutive_failures'],
+            last_result=self._last_result, last_error=self._last_error)
         self._pub_diag.publish(diagnostics_msg(
-            self.get_clock().now().to_msg(), 'plane_node: dominant plane',
-            self.get_fully_qualified_name(), level[0] if isinstance(level, bytes) else level,
-            message, values))
+            self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
+            level, message, values))
 
     def destroy_node(self) -> None:
         """Stop the worker thread, then destroy the node."""

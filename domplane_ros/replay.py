@@ -46,6 +46,7 @@ import time
 from typing import Any, Callable, Iterable, Iterator, NamedTuple, TextIO
 
 from domplane_ros.config import load_params_file, PlaneNodeConfig
+from domplane_ros.diagnostics import plane_status, STATUS_NAME
 from domplane_ros.errors import BagError, ConfigError, ImageDecodeError
 from domplane_ros.image import gray_to_image_fields, message_to_gray
 from domplane_ros.pipeline import FrameResult, PlanePipeline
@@ -72,14 +73,10 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_REFUSED = 2
 
-# As plane_node: diagnostics level ERROR after this many pairs in a row without a plane, and
-# the latency statistics over the last this many pairs.
-_FAILURES_FOR_ERROR = 3
+# As plane_node: the latency statistics over the last this many pairs.
 _LATENCY_WINDOW = 200
-_DIAGNOSTICS_NAME = 'plane_node: dominant plane'
+_DIAGNOSTICS_NAME = STATUS_NAME
 _DIAGNOSTICS_HARDWARE_ID = 'plane_replay'
-# diagnostic_msgs/DiagnosticStatus levels.
-_OK, _WARN, _ERROR = 0, 1, 2
 
 CSV_COLUMNS = (
     'stamp_ns', 'ok', 'reinitialised', 'n_left', 'n_right', 'n_inliers', 'iterations',
@@ -297,38 +294,16 @@ class ReplaySession:
             its one-line message and the key/value pairs with the node's keys.
 
         """
-        result = self.last_result
         counters = self.counters
-        window = self.latencies_ms[-_LATENCY_WINDOW:]
-        lat = np.array(window) if window else np.zeros(1)
-        failures = counters.consecutive_failures
-        if rate == 0.0:
-            level, message = _WARN, 'no stereo pairs received'
-        elif failures >= _FAILURES_FOR_ERROR:
-            level, message = _ERROR, f'no plane for {failures} pairs: ' + (
-                result.reason if result else '')
-        elif result is not None and not result.ok:
-            level, message = _WARN, f'no plane: {result.reason}'
-        else:
-            level, message = _OK, 'plane ' + self.pipeline.state
-        values = [
-            ('input rate [pairs/s]', f'{rate:.2f}'),
-            ('processing latency median [ms]', f'{np.median(lat):.2f}'),
-            ('processing latency p95 [ms]', f'{np.percentile(lat, 95):.2f}'),
-            ('pairs', counters.pairs),
-            ('processed pairs', counters.processed),
-            ('dropped pairs (busy)', 0),
-            ('dropped frames (sync)', self.sync.stats().dropped),
-            ('decode errors', counters.decode_errors + counters.undecodable_messages),
-            ('lock state', self.pipeline.state),
-            ('inliers', result.n_inliers if result else 0),
-            ('final energy', f'{result.estimate.final_energy:.4g}'
-             if result is not None and result.ok else 'n/a'),
-            ('converged', bool(result.ok and result.estimate.converged) if result else False),
-            ('re-initialisations', self.pipeline.stats.reinitialisations),
-            ('last error', self.last_error or 'none'),
-        ]
-        return level, message, [(key, str(value)) for key, value in values]
+        return plane_status(
+            rate=rate, latencies_ms=self.latencies_ms[-_LATENCY_WINDOW:], pairs=counters.pairs,
+            processed=counters.processed, dropped_busy=0,
+            dropped_sync=self.sync.stats().dropped,
+            decode_errors=counters.decode_errors + counters.undecodable_messages,
+            lock_state=self.pipeline.state,
+            reinitialisations=self.pipeline.stats.reinitialisations,
+            consecutive_failures=counters.consecutive_failures, last_result=self.last_result,
+            last_error=self.last_error)
 
 
 # --------------------------------------------------------------------------------------------

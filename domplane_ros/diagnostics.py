@@ -1,0 +1,70 @@
+"""The plane_node status, shared by the live node and the offline replay (no ROS imports)."""
+
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+import numpy as np
+
+# diagnostic_msgs/DiagnosticStatus levels.
+OK, WARN, ERROR = 0, 1, 2
+STATUS_NAME = 'plane_node: dominant plane'
+# Level ERROR after this many pairs in a row without a plane.
+FAILURES_FOR_ERROR = 3
+
+
+def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, processed: int,
+                 dropped_busy: int, dropped_sync: int, decode_errors: int, lock_state: str,
+                 reinitialisations: int, consecutive_failures: int, last_result: Any,
+                 last_error: str) -> tuple[int, str, list[tuple[str, str]]]:
+    """Return the node's diagnostics status.
+
+    Args:
+        rate: Stereo pairs per second over the last period.
+        latencies_ms: Recent per-pair processing latencies, milliseconds.
+        pairs: Pairs made by the synchroniser.
+        processed: Pairs processed.
+        dropped_busy: Pairs replaced before the worker took them.
+        dropped_sync: Frames dropped by the synchroniser.
+        decode_errors: Images rejected by the decoder.
+        lock_state: The pipeline's lock state.
+        reinitialisations: Frames started from the prior.
+        consecutive_failures: Processed pairs in a row without a plane.
+        last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
+        last_error: The last error message ('' if none).
+
+    Returns:
+        ``(level, message, values)``: level 0 OK, 1 WARN (no input, or the last pair had no
+        plane) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a row without a plane); a one-line
+        message; key/value pairs as strings.
+
+    """
+    lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
+    result = last_result
+    if rate == 0.0:
+        level, message = WARN, 'no stereo pairs received'
+    elif consecutive_failures >= FAILURES_FOR_ERROR:
+        level, message = ERROR, f'no plane for {consecutive_failures} pairs: ' + (
+            result.reason if result is not None else '')
+    elif result is not None and not result.ok:
+        level, message = WARN, f'no plane: {result.reason}'
+    else:
+        level, message = OK, 'plane ' + lock_state
+    ok = result is not None and result.ok
+    values = [
+        ('input rate [pairs/s]', f'{rate:.2f}'),
+        ('processing latency median [ms]', f'{np.median(lat):.2f}'),
+        ('processing latency p95 [ms]', f'{np.percentile(lat, 95):.2f}'),
+        ('pairs', pairs),
+        ('processed pairs', processed),
+        ('dropped pairs (busy)', dropped_busy),
+        ('dropped frames (sync)', dropped_sync),
+        ('decode errors', decode_errors),
+        ('lock state', lock_state),
+        ('inliers', result.n_inliers if result is not None else 0),
+        ('final energy', f'{result.estimate.final_energy:.4g}' if ok else 'n/a'),
+        ('converged', bool(ok and result.estimate.converged)),
+        ('re-initialisations', reinitialisations),
+        ('last error', last_error or 'none'),
+    ]
+    return level, message, [(key, str(value)) for key, value in values]
