@@ -188,3 +188,50 @@ def test_runtime_parameter_changes_are_validated(ros_context, scene):
 def test_invalid_startup_parameter_fails_with_its_name(ros_context, override, needle):
     with pytest.raises(ConfigError, match=needle.replace('.', r'\.')):
         PlaneNode(context=ros_context, parameter_overrides=[override])
+
+
+def test_incompatible_publisher_qos_is_warned_once(ros_context, scene):
+    overrides = _prior_overrides(scene) + [Parameter('qos.reliable', value=True)]
+    h = Harness(ros_context, overrides)  # the driver publishes best effort: incompatible
+    try:
+        deadline = time.monotonic() + 10.0
+        while len(h.node._qos_warned) < 2 and time.monotonic() < deadline:
+            h.executor.spin_once(timeout_sec=0.05)
+        assert {'left', 'right'} <= h.node._qos_warned
+    finally:
+        h.close()
+
+
+def test_slow_processing_keeps_newest_pair_and_counts_drops(ros_context, scene):
+    h = Harness(ros_context, _prior_overrides(scene))
+    processed_stamps = []
+    real_process = h.node.pipeline.process
+
+    def slow_process(left, right, stamp_ns, reset=False):
+        time.sleep(0.25)
+        processed_stamps.append(stamp_ns)
+        return real_process(left, right, stamp_ns, reset)
+
+    h.node.pipeline.process = slow_process
+    try:
+        h.wait_for_subscribers()
+        stamp = 50_000_000_000
+        for _ in range(12):
+            h.pub_left.publish(_image(scene.left, stamp, 'left_cam'))
+            h.pub_right.publish(_image(scene.right, stamp, 'right_cam'))
+            stamp += 33_000_000
+            end = time.monotonic() + 0.033
+            while time.monotonic() < end:
+                h.executor.spin_once(timeout_sec=0.005)
+        last_sent = stamp - 33_000_000
+        deadline = time.monotonic() + 10.0
+        while time.monotonic() < deadline and (not processed_stamps
+                                               or processed_stamps[-1] != last_sent):
+            h.executor.spin_once(timeout_sec=0.05)
+        counters = h.node._counters
+        assert processed_stamps[-1] == last_sent  # the newest pair was processed
+        assert counters['dropped_busy'] > 0
+        assert counters['processed'] + counters['dropped_busy'] == counters['pairs']
+        assert len(processed_stamps) < 12
+    finally:
+        h.close()
