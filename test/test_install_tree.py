@@ -43,7 +43,8 @@ def install_prefix(tmp_path_factory) -> Path:
     shutil.copytree(REPO_ROOT, source, ignore=NOT_SOURCE)
     command = [
         sys.executable, '-m', 'pip', 'install', '--quiet', '--disable-pip-version-check',
-        '--no-deps', '--no-build-isolation', '--no-index', '--prefix', str(prefix), str(source),
+        '--no-deps', '--no-build-isolation', '--no-index', '--ignore-installed',
+        '--prefix', str(prefix), str(source),
     ]
     result = subprocess.run(command, capture_output=True, text=True, timeout=120)
     assert result.returncode == 0, f'pip install failed:\n{result.stdout}\n{result.stderr}'
