@@ -8,6 +8,7 @@ target is a strict xfail, so a fix shows up as an unexpected pass.
 from __future__ import annotations
 
 import csv
+import importlib.util
 import math
 from pathlib import Path
 
@@ -143,8 +144,11 @@ def test_markdown_table_marks_failures_and_missing_values():
 
 def test_main_writes_tables_csvs_and_pictures(tmp_path, capsys):
     out = tmp_path / 'eval'
+    # matplotlib is in requirements.txt but not a declared ROS dependency of the package.
+    pictures = importlib.util.find_spec('matplotlib') is not None
     rc = evaluate.main(['--data', str(DATA), '--out', str(out), '--scenes', '2',
-                        '--sequences', '1', '--repeats', '1'])
+                        '--sequences', '1', '--repeats', '1']
+                       + ([] if pictures else ['--no-pictures']))
     assert rc == 0
     text = capsys.readouterr().out
     for heading in ('## kitti', '## chessboards', '## rendered scenes', '## rendered sequences',
@@ -161,6 +165,6 @@ def test_main_writes_tables_csvs_and_pictures(tmp_path, capsys):
                    for row in rows)
     summary = (out / 'summary.md').read_text(encoding='utf-8')
     assert '## targets' in summary and 'kitti: road error' in summary
-    for name in ('contact_sheet.png', 'errors.png'):
+    for name in ('contact_sheet.png', 'errors.png') if pictures else ():
         image = cv2.imread(str(out / name))
         assert image is not None and image.shape[0] > 300 and image.shape[1] > 600
