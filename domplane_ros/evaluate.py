@@ -39,7 +39,6 @@ from dataclasses import dataclass, field, replace
 import math
 import os
 from pathlib import Path
-import platform
 import sys
 import time
 from typing import Any, Callable, Iterable, Sequence
@@ -48,6 +47,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
     os.environ.setdefault(_var, '1')
 
 import cv2  # noqa: E402
+from domplane_ros.bench import machine_name  # noqa: E402
 from domplane_ros.config import (FeatureConfig, MaskConfig, PlaneNodeConfig,  # noqa: E402
                                  PriorConfig)
 from domplane_ros.homography import apply_homography, fit_homography  # noqa: E402
@@ -1010,21 +1010,6 @@ def _legend_patch(colour: str, label: str) -> Any:
 def default_data_dir() -> Path:
     """Return ``../shared/data`` beside the repository if it exists, else ``test/data``."""
     return SHARED_DATA if SHARED_DATA.is_dir() else TEST_DATA
-
-
-def machine_name() -> str:
-    """Return the CPU model and library versions, on one line."""
-    cpu = platform.processor() or 'unknown CPU'
-    try:
-        with open('/proc/cpuinfo', encoding='utf-8') as stream:
-            for line in stream:
-                if line.startswith('model name'):
-                    cpu = line.split(':', 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return (f'{cpu} | {os.cpu_count()} cores, 1 used | Python {platform.python_version()} | '
-            f'numpy {np.__version__} | OpenCV {cv2.__version__}')
 
 
 def _targets(groups: dict[str, list[Case]]) -> list[str]:
