@@ -35,6 +35,7 @@ from scipy.spatial import cKDTree
 
 _GLOBAL_STEP_ITERATIONS = 2
 _POLISH_ROUNDS = 2
+_POLISH_STEPS = 2
 OVER_RELAXATION = 0.5
 
 
@@ -139,10 +140,16 @@ class _TwoStep:
         return r, idx, aux, penalty, 0.5 * s * s + penalty
 
     def run_stage(self, h: np.ndarray, potential: Potential, options: EstimatorConfig,
-                  energies: list[float]) -> tuple[np.ndarray, int, bool]:
-        """Iterate one stage from ``h``; append energies; return (H, iterations, converged)."""
+                  energies: list[float]) -> tuple[np.ndarray, int, bool, tuple]:
+        """Iterate one stage from ``h``; append energies.
+
+        Returns:
+            ``(H, iterations, converged, (pred, r, idx))`` with the predictions of the final
+            ``H`` and their closest-point distances and indices.
+
+        """
         pred = apply_homography(h, self.left)
-        _, _, aux, penalty, terms = self.local_step(pred, potential)
+        r, idx, aux, penalty, terms = self.local_step(pred, potential)
         energy = float(np.sum(terms))
         energies.append(energy)
         for it in range(1, options.max_iterations + 1):
@@ -152,7 +159,7 @@ class _TwoStep:
                 if ext is not None:
                     h_new = ext[0]
             pred_new = apply_homography(h_new, self.left)
-            _, _, aux_new, pen_new, terms_new = self.local_step(pred_new, potential)
+            r, idx, aux_new, pen_new, terms_new = self.local_step(pred_new, potential)
             # Step check: keep a previous auxiliary point where it is cheaper under the new H.
             diff = pred_new - aux
             old_terms = 0.5 * np.einsum('ij,ij->i', diff, diff) + penalty
@@ -168,25 +175,30 @@ class _TwoStep:
             h, pred, aux, penalty, energy = h_new, pred_new, aux_new, pen_new, energy_new
             if move < options.tolerance_px or decrease <= options.energy_tolerance * max(
                     energy, 1e-300):
-                return h, it, True
-        return h, options.max_iterations, False
+                return h, it, True, (pred, r, idx)
+        return h, options.max_iterations, False, (pred, r, idx)
 
-    def polish(self, h: np.ndarray, threshold_px: float
+    def polish(self, h: np.ndarray, threshold_px: float, matched: tuple
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Euclidean refinement: fit H to the inliers' closest points, re-match, repeat.
+
+        Args:
+            h: (3, 3) float64 converged homography.
+            threshold_px: Inlier threshold.
+            matched: ``(pred, r, idx)`` of ``h`` from the last local step.
 
         Returns:
             The refined H, and the closest distances and indices of its predictions.
 
         """
-        pred = apply_homography(h, self.left)
-        r, idx = self.tree.query(pred)
+        pred, r, idx = matched
         for _ in range(_POLISH_ROUNDS):
             inl = r < threshold_px
             if np.count_nonzero(inl) < 8:
                 break
             target = np.where(inl[:, None], self.right[idx], pred)
-            h_new, _, _ = self.refiner.refine(h, target, inl.astype(np.float64), 3)
+            h_new, _, _ = self.refiner.refine(h, target, inl.astype(np.float64),
+                                              _POLISH_STEPS)
             if check_homography(h_new):
                 break
             pred_new = apply_homography(h_new, self.left)
@@ -226,7 +238,7 @@ def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
     for k, scale in enumerate(gnc_scales(options)):
         potential = make_potential(options.potential, options.lambda_weight, scale)
         before = len(energies)
-        h, its, converged = state.run_stage(h, potential, options, energies)
+        h, its, converged, matched = state.run_stage(h, potential, options, energies)
         stages.extend([k] * (len(energies) - before))
         iterations += its
     trace = np.asarray(energies)
@@ -234,9 +246,9 @@ def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
     if reason:
         return FailedEstimate(reason, iterations, trace, 0, np.asarray(stages, np.int64))
     if options.euclidean_refinement:
-        h, r, idx = state.polish(h, options.threshold_px)
+        h, r, idx = state.polish(h, options.threshold_px, matched)
     else:
-        r, idx = state.tree.query(apply_homography(h, state.left))
+        _, r, idx = matched
     h = normalise_scale(h)
     inliers = r < options.threshold_px
     if np.count_nonzero(inliers) < options.min_inliers:
