@@ -1,4 +1,4 @@
-"""The evaluation script on the real pairs in test/data (no ../shared/data needed).
+"""The evaluation script on the real pairs in test/data (no the shared data folder needed).
 
 The bounds below are the measured figures with a margin, not the targets: where the product
 meets a target the test pins what it measures, and where it misses one (chessboards) the
@@ -42,7 +42,7 @@ def test_test_data_is_small_and_licensed():
 
 
 def test_kitti_reference_reproduces_the_shared_readme(kitti_reference):
-    # ../shared/data/README.md: d = 0.00180 x + 0.32364 y - 57.22, about 56 % within 1 px.
+    # the shared data folder/README.md: d = 0.00180 x + 0.32364 y - 57.22, about 56 % within 1 px.
     plane = kitti_reference.plane
     assert plane.a == pytest.approx(0.00180, abs=1e-5)
     assert plane.b == pytest.approx(0.32364, abs=1e-4)
