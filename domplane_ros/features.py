@@ -18,6 +18,7 @@ from typing import Sequence
 
 import cv2
 from domplane_ros.config import FeatureConfig
+from domplane_ros.image import check_gray
 import numpy as np
 
 # Corner responses at or below this are noise-free flat image regions (cv2.cornerMinEigenVal
@@ -25,15 +26,6 @@ import numpy as np
 _MIN_RESPONSE = 1e-7
 # Three iterations are enough: the start is within a pixel of the corner (measured).
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 3, 0.1)
-
-
-def _check_image(gray: np.ndarray) -> None:
-    if not isinstance(gray, np.ndarray):
-        raise ValueError(f'gray must be a numpy array, got {type(gray).__name__}')
-    if gray.ndim != 2:
-        raise ValueError(f'gray must be a 2-D (H, W) image, got shape {gray.shape}')
-    if gray.dtype != np.uint8:
-        raise ValueError(f'gray must have dtype uint8, got {gray.dtype}')
 
 
 def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, int, int, int]:
@@ -86,7 +78,7 @@ def detect_corners(gray: np.ndarray, config: FeatureConfig,
         ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
 
     """
-    _check_image(gray)
+    check_gray(gray)
     height, width = gray.shape
     x0, y0, x1, y1 = roi_to_pixels(config.roi if roi is None else roi, width, height)
     empty = np.zeros((0, 2), np.float64)

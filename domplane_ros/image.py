@@ -359,3 +359,29 @@ def rgb_to_image_fields(array: np.ndarray, encoding: str = 'rgb8') -> dict[str, 
         'step': int(width * 3),
         'data': np.ascontiguousarray(array).tobytes(),
     }
+
+
+def check_gray(image: Any, name: str = 'gray') -> np.ndarray:
+    """Check that ``image`` is a non-empty ``(H, W) uint8`` numpy array and return it.
+
+    Args:
+        image: The array to check.
+        name: Its name in the error message.
+
+    Returns:
+        ``image`` itself.
+
+    Raises:
+        ValueError: If it is not a numpy array, not 2-D, not uint8, or empty; the message
+            names the array and the problem.
+
+    """
+    if not isinstance(image, np.ndarray):
+        raise ValueError(f'{name} must be a numpy array, got {type(image).__name__}')
+    if image.ndim != 2:
+        raise ValueError(f'{name} must be a 2-D (H, W) image, got shape {image.shape}')
+    if image.dtype != np.uint8:
+        raise ValueError(f'{name} must have dtype uint8, got {image.dtype}')
+    if min(image.shape) < 1:
+        raise ValueError(f'{name} is empty, shape {image.shape}')
+    return image

@@ -20,6 +20,7 @@ from typing import Any
 
 import cv2
 from domplane_ros.config import MaskConfig
+from domplane_ros.image import check_gray
 import numpy as np
 
 PLANE = 255
@@ -34,18 +35,6 @@ _PLANE_RGB = (0, 255, 0)
 _OBSTACLE_RGB = (255, 0, 0)
 _INLIER_RGB = (0, 255, 255)
 _OUTLIER_RGB = (255, 0, 255)
-
-
-def _check_gray(name: str, image: Any) -> np.ndarray:
-    if not isinstance(image, np.ndarray):
-        raise ValueError(f'{name} must be a numpy array, got {type(image).__name__}')
-    if image.ndim != 2:
-        raise ValueError(f'{name} must be a 2-D (H, W) image, got shape {image.shape}')
-    if image.dtype != np.uint8:
-        raise ValueError(f'{name} must have dtype uint8, got {image.dtype}')
-    if min(image.shape) < 1:
-        raise ValueError(f'{name} is empty, shape {image.shape}')
-    return image
 
 
 def _check_homography(homography: Any) -> np.ndarray:
@@ -138,8 +127,8 @@ def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
             finite, non-singular (3, 3) matrix.
 
     """
-    left = _check_gray('left', left)
-    right = _check_gray('right', right)
+    left = check_gray(left, 'left')
+    right = check_gray(right, 'right')
     hom = _check_homography(homography)
     height, width = left.shape
     left_small, scale_left = _resize(left, config.scale)
@@ -219,8 +208,8 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
             array is not (N, 2).
 
     """
-    gray = _check_gray('gray', gray)
-    mask = _check_gray('mask', mask)
+    gray = check_gray(gray, 'gray')
+    mask = check_gray(mask, 'mask')
     if mask.shape != gray.shape:
         raise ValueError(f'mask shape {mask.shape} differs from image shape {gray.shape}')
     rgb = cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)

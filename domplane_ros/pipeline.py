@@ -14,6 +14,7 @@ from domplane_ros.config import PlaneNodeConfig, PriorConfig
 from domplane_ros.estimator import estimate_plane, FailedEstimate, PlaneEstimate
 from domplane_ros.features import detect_corners
 from domplane_ros.homography import apply_homography
+from domplane_ros.image import check_gray
 from domplane_ros.mask import plane_mask
 from domplane_ros.prior import prior_candidates
 import numpy as np
@@ -141,9 +142,8 @@ class PlanePipeline:
 
         """
         t0 = time.perf_counter()
-        for name, img in (('left', left), ('right', right)):
-            if not isinstance(img, np.ndarray) or img.ndim != 2 or img.dtype != np.uint8:
-                raise ValueError(f'{name} image must be a 2-D uint8 array')
+        check_gray(left, 'left')
+        check_gray(right, 'right')
         shapes = (left.shape, right.shape)
         if (reset or (self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns)
                 or (self._last_shape is not None and shapes != self._last_shape)):
