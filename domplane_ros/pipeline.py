@@ -108,7 +108,7 @@ class PlanePipeline:
     def update_config(self, config: PlaneNodeConfig) -> None:
         """Use a new configuration from the next frame on, keeping the warm start.
 
-        A changed prior, initial homography or image ROI drops the warm start.
+        A changed prior or initial homography drops the warm start.
         """
         if (config.prior != self.config.prior
                 or config.initial_homography != self.config.initial_homography):
