@@ -126,6 +126,44 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               0.1, 500.0),
     ParamSpec('pipeline.check_prior_bounds', True, 'bool',
               'Reject homographies that move the image corners outside what the prior allows.'),
+    ParamSpec('pipeline.max_tracking_frames', 2, 'int',
+              "Frames in the 'tracking' state (the last homography carried forward through "
+              "the cameras' tracked motion) after a failed or suspicious estimate before the "
+              'prior search starts.', 0, 100),
+    ParamSpec('pipeline.search_candidates_per_frame', 3, 'int',
+              'Prior candidates refined per frame during a search; a search of '
+              'prior.refine_best candidates is spread over frames, keeping the best so far.',
+              1, 100),
+    ParamSpec('pipeline.fast_joint_velocity', 0.5, 'float',
+              'Head joint speed (largest |velocity| of head/joint_states, rad/s) above which '
+              'a big change is expected: no energy-jump check, and a wide warm-start basin '
+              'when tracking gives no prediction.', 0.0, 1e3),
+    # Temporal prediction.
+    ParamSpec('tracking.enabled', True, 'bool',
+              "Warm-start from the last homography moved through both cameras' tracked "
+              'frame-to-frame motion (H_t ~ M_right H_{t-1} M_left^-1); false warm-starts '
+              'from the last homography as is.'),
+    ParamSpec('tracking.window_px', 21, 'int',
+              'Side of the pyramidal Lucas-Kanade window, pixels.', 5, 101),
+    ParamSpec('tracking.pyramid_levels', 3, 'int',
+              'Pyramid levels of the Lucas-Kanade tracker above full resolution.', 0, 8),
+    ParamSpec('tracking.forward_backward_px', 1.0, 'float',
+              'Largest forward-backward round-trip error of a kept track, pixels.',
+              0.01, 50.0),
+    ParamSpec('tracking.min_tracks', 20, 'int',
+              'Fewer kept tracks than this in a camera: no prediction this frame.', 4, 10000),
+    ParamSpec('tracking.min_inlier_ratio', 0.5, 'float',
+              "Share of a camera's tracks that must fit its motion homography (MAGSAC++).",
+              0.0, 1.0),
+    ParamSpec('tracking.threshold_px', 2.0, 'float',
+              'Inlier threshold of the robust camera-motion fit, pixels.', 0.1, 50.0),
+    # Optional head input.
+    ParamSpec('head.joint_states_topic', '', 'str',
+              'sensor_msgs/JointState topic of the head (e.g. head/joint_states); empty: no '
+              'joint input. Fast joints hint at a big change (see '
+              'pipeline.fast_joint_velocity).'),
+    ParamSpec('head.max_age_s', 0.5, 'float',
+              'Joint states older than this (receive time) are ignored, seconds.', 0.0, 60.0),
     # Synchroniser and transport.
     ParamSpec('sync.slop_s', 0.01, 'float',
               'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
@@ -325,10 +363,42 @@ class PipelineConfig:
     max_energy_ratio: float = 4.0
     warm_gnc_start_px: float = 6.0
     check_prior_bounds: bool = True
+    max_tracking_frames: int = 2
+    search_candidates_per_frame: int = 3
+    fast_joint_velocity: float = 0.5
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""
         _validate_section(self, 'pipeline')
+
+
+@dataclass(frozen=True)
+class TrackingConfig:
+    """Temporal prediction settings (see ``tracking.*`` in :data:`PARAMETERS`)."""
+
+    enabled: bool = True
+    window_px: int = 21
+    pyramid_levels: int = 3
+    forward_backward_px: float = 1.0
+    min_tracks: int = 20
+    min_inlier_ratio: float = 0.5
+    threshold_px: float = 2.0
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'tracking')
+
+
+@dataclass(frozen=True)
+class HeadConfig:
+    """Optional head joint input of the node (see ``head.*`` in :data:`PARAMETERS`)."""
+
+    joint_states_topic: str = ''
+    max_age_s: float = 0.5
+
+    def __post_init__(self) -> None:
+        """Validate every field against :data:`PARAMETERS`."""
+        _validate_section(self, 'head')
 
 
 @dataclass(frozen=True)
@@ -377,6 +447,8 @@ class PlaneNodeConfig:
     prior: PriorConfig = field(default_factory=PriorConfig)
     mask: MaskConfig = field(default_factory=MaskConfig)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
+    tracking: TrackingConfig = field(default_factory=TrackingConfig)
+    head: HeadConfig = field(default_factory=HeadConfig)
     sync: SyncConfig = field(default_factory=SyncConfig)
     transport: TransportConfig = field(default_factory=TransportConfig)
     initial_homography: tuple[float, ...] = ()
@@ -442,6 +514,8 @@ class PlaneNodeConfig:
             prior=PriorConfig(**section('prior')),
             mask=MaskConfig(**section('mask')),
             pipeline=PipelineConfig(**section('pipeline')),
+            tracking=TrackingConfig(**section('tracking')),
+            head=HeadConfig(**section('head')),
             sync=SyncConfig(**section('sync')),
             transport=TransportConfig(
                 reliable=values['qos.reliable'], depth=values['qos.depth'],
@@ -452,7 +526,8 @@ class PlaneNodeConfig:
     def to_flat(self) -> dict[str, Any]:
         """Return the configuration as dotted parameter names and values."""
         out: dict[str, Any] = {}
-        for prefix in ('features', 'estimator', 'prior', 'mask', 'pipeline', 'sync'):
+        for prefix in ('features', 'estimator', 'prior', 'mask', 'pipeline', 'tracking',
+                       'head', 'sync'):
             part = getattr(self, prefix)
             for f in fields(part):
                 value = getattr(part, f.name)

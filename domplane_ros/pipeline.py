@@ -8,6 +8,7 @@ homography, its energy, the lock state, the counters) lives here and nowhere els
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+import math
 import time
 
 from domplane_ros.config import PlaneNodeConfig, PriorConfig
@@ -16,16 +17,23 @@ from domplane_ros.features import detect_corners
 from domplane_ros.homography import apply_homography
 from domplane_ros.image import check_gray
 from domplane_ros.mask import plane_mask
-from domplane_ros.prior import prior_candidates
+from domplane_ros.prior import prior_candidates, screen_candidates
+from domplane_ros.tracking import camera_motion, predict_plane_homography
 import numpy as np
+from scipy.spatial import cKDTree
 
 # Lock states reported in diagnostics.
-SEARCHING = 'searching'
-LOCKED = 'locked'
+LOCKED = 'locked'        # the last frame gave a plane; the next one warm-starts from it
+TRACKING = 'tracking'    # an estimate failed; the last plane is carried through the motion
+SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidates per frame
+LOCK_STATES = (LOCKED, TRACKING, SEARCHING)
 
 # Margin (fraction of the image diagonal) around the image-corner positions that the prior's
 # candidates reach; a homography moving a corner beyond it violates the prior.
 _PRIOR_BOUNDS_MARGIN = 0.15
+# Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
+# for a first pass.
+_WIDE_BASIN_FACTOR = 4.0
 
 
 @dataclass(frozen=True)
@@ -40,11 +48,22 @@ class FrameResult:
         estimate: The estimator's result (success or failure value).
         left_points: (N, 2) float64 left corners.
         right_points: (M, 2) float64 right corners.
-        reinitialised: True if this frame started from the prior or the configured initial
-            homography rather than the last frame's result.
+        reinitialised: True if this frame worked on the prior search (or the configured
+            initial homography) rather than a warm start.
         reason: Why the frame failed ('' when ok).
-        state: Lock state after this frame: ``'locked'`` or ``'searching'``.
-        timings_ms: Milliseconds spent in ``features``, ``estimate``, ``mask`` and ``total``.
+        state: Lock state after this frame: ``'locked'``, ``'tracking'`` or ``'searching'``.
+        timings_ms: Milliseconds spent in ``features``, ``tracking``, ``estimate``, ``mask``
+            and ``total``.
+        warm_start: Where this frame's estimate started: ``'prediction'`` (the last
+            homography moved through the tracked camera motion), ``'last'`` (the last
+            homography as is), ``'search'`` (prior candidates), ``'initial'`` (the
+            configured initial homography).
+        prediction: (3, 3) float64 predicted homography ``M_right H M_left^-1`` of this frame,
+            or None when tracking gave none.
+        candidates: Prior candidates refined in this frame (at most
+            ``pipeline.search_candidates_per_frame``).
+        fast_motion: True if the head's joints moved faster than
+            ``pipeline.fast_joint_velocity``.
 
     """
 
@@ -59,6 +78,10 @@ class FrameResult:
     reason: str
     state: str
     timings_ms: dict[str, float] = field(default_factory=dict)
+    warm_start: str = ''
+    prediction: np.ndarray | None = None
+    candidates: int = 0
+    fast_motion: bool = False
 
     @property
     def n_inliers(self) -> int:
@@ -75,10 +98,38 @@ class PipelineStats:
     failed: int = 0
     reinitialisations: int = 0
     resets: int = 0
+    predictions: int = 0
+    candidates: int = 0
+
+
+@dataclass
+class _Search:
+    """A prior search spread over frames: candidates tried so far and the best result."""
+
+    tried: set[int] = field(default_factory=set)
+    best: np.ndarray | None = None
+    initial_tried: bool = False
+
+
+@dataclass
+class _Previous:
+    """The previous frame's images and corners, for tracking."""
+
+    left: np.ndarray
+    right: np.ndarray
+    left_points: np.ndarray
+    right_points: np.ndarray
 
 
 class PlanePipeline:
     """Dominant-plane estimation over a stream of stereo pairs.
+
+    The lock state machine: ``'locked'`` while frames give a plane (each warm-starts from
+    the prediction, else the last homography); after a failed or suspicious estimate,
+    ``'tracking'`` for up to ``pipeline.max_tracking_frames`` frames, carrying the last plane
+    forward through the cameras' tracked motion; then ``'searching'``: the prior candidates are
+    screened cheaply every frame and ``pipeline.search_candidates_per_frame`` of them refined,
+    the best so far carried forward, until ``prior.refine_best`` have been tried.
 
     Args:
         config: The whole configuration (the node's parameters).
@@ -86,7 +137,7 @@ class PlanePipeline:
     """
 
     def __init__(self, config: PlaneNodeConfig | None = None) -> None:
-        """Start with no warm start: the first frame re-initialises."""
+        """Start with no warm start: the first frames search the prior."""
         self.config = config if config is not None else PlaneNodeConfig()
         self.stats = PipelineStats()
         self._last_h: np.ndarray | None = None
@@ -94,16 +145,21 @@ class PlanePipeline:
         self._last_stamp_ns: int | None = None
         self._last_shape: tuple[tuple[int, int], tuple[int, int]] | None = None
         self._bounds_cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
+        self._state = SEARCHING
+        self._tracking_frames = 0
+        self._search: _Search | None = None
+        self._previous: _Previous | None = None
 
     @property
     def last_homography(self) -> np.ndarray | None:
-        """Return the warm start for the next frame, or None (the next frame re-initialises)."""
+        """Return the last plane (or the one carried while tracking), or None."""
         return None if self._last_h is None else self._last_h.copy()
 
     @property
     def state(self) -> str:
-        """Return the lock state: ``'locked'`` while a warm start exists."""
-        return LOCKED if self._last_h is not None else SEARCHING
+        """Return the lock state: ``'locked'``, ``'tracking'`` or ``'searching'``."""
+        return self._state
 
     def update_config(self, config: PlaneNodeConfig) -> None:
         """Use a new configuration from the next frame on, keeping the warm start.
@@ -114,17 +170,22 @@ class PlanePipeline:
                 or config.initial_homography != self.config.initial_homography):
             self.reset()
             self._bounds_cache.clear()
+            self._candidates_cache.clear()
         self.config = config
 
     def reset(self) -> None:
-        """Drop the warm start: the next frame re-initialises from the prior."""
-        if self._last_h is not None:
+        """Drop the warm start: the next frames search the prior."""
+        if self._last_h is not None or self._state != SEARCHING:
             self.stats.resets += 1
         self._last_h = None
         self._last_energy_per_point = None
+        self._state = SEARCHING
+        self._tracking_frames = 0
+        self._search = None
+        self._previous = None
 
     def process(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
-                reset: bool = False) -> FrameResult:
+                reset: bool = False, joint_speed: float | None = None) -> FrameResult:
         """Estimate the plane for one stereo pair.
 
         Args:
@@ -133,17 +194,21 @@ class PlanePipeline:
             stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one drops
                 the warm start (clock reset, bag loop).
             reset: Drop the warm start before this frame.
+            joint_speed: Largest head joint speed in rad/s, if known (None: no joint input).
 
         Returns:
             The :class:`FrameResult`; it is never a non-finite homography.
 
         Raises:
-            ValueError: If an image is not a 2-D uint8 array.
+            ValueError: If an image is not a 2-D uint8 array, or ``joint_speed`` is not
+                finite.
 
         """
         t0 = time.perf_counter()
         check_gray(left, 'left')
         check_gray(right, 'right')
+        if joint_speed is not None and not math.isfinite(joint_speed):
+            raise ValueError(f'joint_speed must be finite, got {joint_speed!r}')
         shapes = (left.shape, right.shape)
         if (reset or (self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns)
                 or (self._last_shape is not None and shapes != self._last_shape)):
@@ -152,72 +217,210 @@ class PlanePipeline:
         self._last_shape = shapes
         self.stats.frames += 1
         cfg = self.config
+        fast = joint_speed is not None and abs(joint_speed) > cfg.pipeline.fast_joint_velocity
         left_pts = detect_corners(left, cfg.features)
         right_pts = detect_corners(right, cfg.features)
         t1 = time.perf_counter()
         height, width = left.shape
-        reinit = self._last_h is None
-        estimate = self._estimate(left_pts, right_pts, (width, height))
-        if estimate.ok and not reinit:
-            reason = self._suspicious(estimate, left_pts.shape[0], (width, height))
-            if reason:
-                # The warm start went astray: start again from the prior in this frame.
-                reinit = True
-                self._last_h = None
-                estimate = self._estimate(left_pts, right_pts, (width, height))
-        elif not estimate.ok and not reinit:
-            reinit = True
-            self._last_h = None
-            estimate = self._estimate(left_pts, right_pts, (width, height))
-        if reinit:
-            self.stats.reinitialisations += 1
-        reason = estimate.reason
-        if estimate.ok:
-            reason = self._suspicious(estimate, left_pts.shape[0], (width, height),
-                                      energy=False)
+        size = (width, height)
+        motions = self._camera_motions(left, right)
         t2 = time.perf_counter()
-        if estimate.ok and not reason:
+        step = _Step()
+        if self._state != SEARCHING:
+            self._track_or_lock(step, left_pts, right_pts, size, motions, fast)
+        if self._state == SEARCHING:
+            self._search_step(step, left_pts, right_pts, size, motions)
+        t3 = time.perf_counter()
+        estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
+        if step.accepted:
             h = estimate.homography
             mask = plane_mask(left, right, h, cfg.mask)
             self._last_h = h
             self._last_energy_per_point = estimate.final_energy / max(left_pts.shape[0], 1)
             self.stats.succeeded += 1
-            ok = True
         else:
-            mask = np.zeros(left.shape, np.uint8)
-            self._last_h = None
-            self._last_energy_per_point = None
-            self.stats.failed += 1
             h = None
-            ok = False
-        t3 = time.perf_counter()
-        timings = {'features': 1e3 * (t1 - t0), 'estimate': 1e3 * (t2 - t1),
-                   'mask': 1e3 * (t3 - t2), 'total': 1e3 * (t3 - t0)}
-        return FrameResult(stamp_ns=stamp_ns, ok=ok, homography=h, mask=mask,
+            mask = np.zeros(left.shape, np.uint8)
+            self.stats.failed += 1
+        self._previous = _Previous(left.copy(), right.copy(), left_pts, right_pts)
+        t4 = time.perf_counter()
+        timings = {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
+                   'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3),
+                   'total': 1e3 * (t4 - t0)}
+        return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
                            estimate=estimate, left_points=left_pts, right_points=right_pts,
-                           reinitialised=reinit, reason='' if ok else reason,
-                           state=self.state, timings_ms=timings)
+                           reinitialised=step.reinitialised,
+                           reason='' if step.accepted else (step.reason or estimate.reason),
+                           state=self._state, timings_ms=timings,
+                           warm_start=step.warm_start, prediction=step.prediction,
+                           candidates=step.candidates, fast_motion=fast)
 
-    def _estimate(self, left_pts: np.ndarray, right_pts: np.ndarray,
-                  size: tuple[int, int]) -> PlaneEstimate | FailedEstimate:
+    # --- Temporal prediction ---------------------------------------------------------------
+    def _camera_motions(self, left: np.ndarray, right: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return ``(M_left, M_right)`` from the previous frame, or None."""
+        cfg = self.config.tracking
+        prev = self._previous
+        if not cfg.enabled or prev is None:
+            return None
+        if self._state == SEARCHING and (self._search is None or self._search.best is None):
+            return None
+        motion_left = camera_motion(prev.left, left, prev.left_points, cfg)
+        if not motion_left.ok:
+            return None
+        motion_right = camera_motion(prev.right, right, prev.right_points, cfg)
+        if not motion_right.ok:
+            return None
+        return motion_left.homography, motion_right.homography
+
+    def _propagate(self, h: np.ndarray, motions: tuple[np.ndarray, np.ndarray] | None
+                   ) -> np.ndarray | None:
+        if motions is None:
+            return None
+        return predict_plane_homography(h, motions[0], motions[1])
+
+    # --- Locked and tracking ---------------------------------------------------------------
+    def _track_or_lock(self, step: _Step, left_pts: np.ndarray, right_pts: np.ndarray,
+                       size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
+                       fast: bool) -> None:
+        assert self._last_h is not None
         cfg = self.config
-        if left_pts.shape[0] < cfg.estimator.min_inliers:
-            return FailedEstimate(f'too few left features: {left_pts.shape[0]} < '
-                                  f'min_inliers {cfg.estimator.min_inliers}')
-        if right_pts.shape[0] < 4:
-            return FailedEstimate(f'too few right features: {right_pts.shape[0]}')
-        if self._last_h is not None:
-            warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
-                                                           cfg.pipeline.warm_gnc_start_px))
-            return estimate_plane(left_pts, right_pts, self._last_h, warm)
-        if cfg.initial_homography:
+        prediction = self._propagate(self._last_h, motions)
+        if prediction is not None and self._suspicious_bounds(prediction, size):
+            prediction = None
+        step.prediction = prediction
+        if prediction is not None:
+            self.stats.predictions += 1
+        starts = [('prediction', prediction)] if prediction is not None else []
+        starts.append(('last', self._last_h))
+        reason = self._too_few(left_pts, right_pts)
+        for name, init in starts if not reason else ():
+            wide = fast and prediction is None
+            estimate = self._warm_estimate(left_pts, right_pts, init, wide)
+            step.estimate, step.warm_start = estimate, name
+            if not estimate.ok:
+                reason = estimate.reason
+                continue
+            reason = self._suspicious(estimate, left_pts.shape[0], size,
+                                      energy=not fast and self._state == LOCKED)
+            if not reason:
+                step.accepted = True
+                self._state = LOCKED
+                self._tracking_frames = 0
+                return
+        step.reason = reason
+        # Failed or suspicious: carry the plane forward (tracking) or give up (searching).
+        self._tracking_frames += 1
+        if self._tracking_frames <= cfg.pipeline.max_tracking_frames:
+            self._state = TRACKING
+            self._last_h = prediction if prediction is not None else self._last_h
+            return
+        self._start_search()
+
+    def _warm_estimate(self, left_pts: np.ndarray, right_pts: np.ndarray, init: np.ndarray,
+                       wide: bool) -> PlaneEstimate | FailedEstimate:
+        cfg = self.config
+        warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
+                                                       cfg.pipeline.warm_gnc_start_px))
+        if wide:
+            # Fast head and no prediction: a first pass with a wide basin.
+            wide_options = replace(cfg.estimator, threshold_px=min(
+                200.0, _WIDE_BASIN_FACTOR * cfg.estimator.threshold_px))
+            first = estimate_plane(left_pts, right_pts, init, wide_options)
+            if first.ok:
+                init = first.homography
+        return estimate_plane(left_pts, right_pts, init, warm)
+
+    # --- Searching -------------------------------------------------------------------------
+    def _start_search(self) -> None:
+        self._state = SEARCHING
+        self._tracking_frames = 0
+        self._last_h = None
+        self._last_energy_per_point = None
+        self._search = None
+
+    def _search_step(self, step: _Step, left_pts: np.ndarray, right_pts: np.ndarray,
+                     size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
+                     ) -> None:
+        """Refine the next few prior candidates; accept the best once enough were tried."""
+        cfg = self.config
+        step.reinitialised = True
+        if self._search is None:
+            self._search = _Search()
+            self.stats.reinitialisations += 1
+        search = self._search
+        reason = self._too_few(left_pts, right_pts)
+        if reason:
+            step.reason = reason
+            return
+        budget = cfg.pipeline.search_candidates_per_frame
+        best: PlaneEstimate | FailedEstimate | None = None
+        if search.best is not None:
+            # The best so far, moved to this frame and refined on its points.
+            start = self._propagate(search.best, motions)
+            best = self._warm_estimate(left_pts, right_pts,
+                                       start if start is not None else search.best, False)
+            if best.ok and self._suspicious(best, left_pts.shape[0], size, energy=False):
+                best = None
+        if cfg.initial_homography and not search.initial_tried:
+            search.initial_tried = True
+            budget -= 1
+            step.candidates += 1
             first = estimate_plane(left_pts, right_pts, np.array(cfg.initial_homography),
                                    cfg.estimator)
             if first.ok and not self._suspicious(first, left_pts.shape[0], size,
                                                  energy=False):
-                return first
-        return estimate_plane(left_pts, right_pts, None, cfg.estimator, prior=cfg.prior,
-                              image_size=size)
+                step.warm_start = 'initial'
+                self._accept_search(step, first)
+                return
+        candidates = self._candidates(size)
+        limit = min(cfg.prior.refine_best, candidates.shape[0])
+        tree = cKDTree(right_pts)
+        costs = screen_candidates(candidates, left_pts, tree, cfg.prior.screen_threshold_px)
+        order = [int(i) for i in np.argsort(costs, kind='stable') if int(i) not in search.tried]
+        for index in order[:max(0, min(budget, limit - len(search.tried)))]:
+            search.tried.add(index)
+            step.candidates += 1
+            result = estimate_plane(left_pts, right_pts, candidates[index], cfg.estimator)
+            if result.ok and self._suspicious(result, left_pts.shape[0], size, energy=False):
+                continue
+            if best is None or _better(result, best):
+                best = result
+        self.stats.candidates += step.candidates
+        step.warm_start = 'search'
+        step.estimate = best
+        search.best = best.homography if best is not None and best.ok else None
+        if len(search.tried) < limit:
+            step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
+                           'refined')
+            return
+        if best is not None and best.ok:
+            self._accept_search(step, best)
+            return
+        step.reason = ('prior search found no plane' if best is None else
+                       f'prior search found no plane: {best.reason}')
+        self._search = None  # start again with the next frame's points
+
+    def _accept_search(self, step: _Step, estimate: PlaneEstimate) -> None:
+        step.estimate = estimate
+        step.accepted = True
+        self._state = LOCKED
+        self._search = None
+        self._tracking_frames = 0
+
+    def _candidates(self, size: tuple[int, int]) -> np.ndarray:
+        if size not in self._candidates_cache:
+            self._candidates_cache[size] = prior_candidates(self.config.prior, *size)
+        return self._candidates_cache[size]
+
+    # --- Checks ----------------------------------------------------------------------------
+    def _too_few(self, left_pts: np.ndarray, right_pts: np.ndarray) -> str:
+        min_inliers = self.config.estimator.min_inliers
+        if left_pts.shape[0] < min_inliers:
+            return f'too few left features: {left_pts.shape[0]} < min_inliers {min_inliers}'
+        if right_pts.shape[0] < 4:
+            return f'too few right features: {right_pts.shape[0]}'
+        return ''
 
     def _suspicious(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
                     energy: bool = True) -> str:
@@ -229,10 +432,13 @@ class PlanePipeline:
             if per_point > limit:
                 return (f'energy jump: {per_point:.3g} per point > {cfg.max_energy_ratio} x '
                         f'last {self._last_energy_per_point:.3g}')
-        if cfg.check_prior_bounds:
+        return self._suspicious_bounds(estimate.homography, size)
+
+    def _suspicious_bounds(self, homography: np.ndarray, size: tuple[int, int]) -> str:
+        if self.config.pipeline.check_prior_bounds:
             low, high = self._prior_bounds(size)
             corners = _image_corners(*size)
-            mapped = apply_homography(estimate.homography, corners)
+            mapped = apply_homography(homography, corners)
             if np.any(mapped < low) or np.any(mapped > high):
                 return 'homography outside the prior: an image corner maps beyond its range'
         return ''
@@ -246,6 +452,28 @@ class PlanePipeline:
             self._bounds_cache[size] = (mapped.min(axis=0) - margin,
                                         mapped.max(axis=0) + margin)
         return self._bounds_cache[size]
+
+
+@dataclass
+class _Step:
+    """What one frame's estimation got to (internal)."""
+
+    estimate: PlaneEstimate | FailedEstimate | None = None
+    accepted: bool = False
+    reason: str = ''
+    warm_start: str = ''
+    prediction: np.ndarray | None = None
+    candidates: int = 0
+    reinitialised: bool = False
+
+
+def _better(a: PlaneEstimate | FailedEstimate, b: PlaneEstimate | FailedEstimate) -> bool:
+    """Return True if ``a`` is a better search result than ``b`` (same points)."""
+    if a.ok != b.ok:
+        return bool(a.ok)
+    if not a.ok:
+        return a.n_inliers > b.n_inliers
+    return a.final_energy < b.final_energy
 
 
 def _bounds_prior(prior: PriorConfig) -> PriorConfig:

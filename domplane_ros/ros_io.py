@@ -23,7 +23,8 @@ _TYPES = {
 }
 
 # Parameters that only take effect when the node starts.
-READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s'})
+READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s',
+                       'head.joint_states_topic'})
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
