@@ -16,7 +16,8 @@ FAILURES_FOR_ERROR = 3
 def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, processed: int,
                  dropped_busy: int, dropped_sync: int, decode_errors: int, lock_state: str,
                  reinitialisations: int, consecutive_failures: int, last_result: Any,
-                 last_error: str) -> tuple[int, str, list[tuple[str, str]]]:
+                 last_error: str, joint_speed: float | None = None
+                 ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
     Args:
@@ -27,11 +28,13 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         dropped_busy: Pairs replaced before the worker took them.
         dropped_sync: Frames dropped by the synchroniser.
         decode_errors: Images rejected by the decoder.
-        lock_state: The pipeline's lock state.
+        lock_state: The pipeline's lock state: ``'locked'``, ``'tracking'`` or
+            ``'searching'``.
         reinitialisations: Frames started from the prior.
         consecutive_failures: Processed pairs in a row without a plane.
         last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
         last_error: The last error message ('' if none).
+        joint_speed: The head's largest joint speed in rad/s, or None without joint input.
 
     Returns:
         ``(level, message, values)``: level 0 OK, 1 WARN (no input, or the last pair had no
@@ -61,6 +64,9 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('dropped frames (sync)', dropped_sync),
         ('decode errors', decode_errors),
         ('lock state', lock_state),
+        ('warm start', (result.warm_start or 'none') if result is not None else 'none'),
+        ('prior candidates (last frame)', result.candidates if result is not None else 0),
+        ('head joint speed [rad/s]', 'n/a' if joint_speed is None else f'{joint_speed:.3f}'),
         ('inliers', result.n_inliers if result is not None else 0),
         ('final energy', f'{result.estimate.final_energy:.4g}' if ok else 'n/a'),
         ('converged', bool(ok and result.estimate.converged)),

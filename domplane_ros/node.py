@@ -2,8 +2,10 @@
 
 Subscribes to ``left/image_raw`` and ``right/image_raw``, pairs them by stamp, and publishes
 ``plane/homography``, ``plane/mask``, ``plane/debug_image`` (only while subscribed) and
-``/diagnostics``. Image callbacks only hand work over: a worker thread processes the newest
-pair, and a pair that is replaced before the worker takes it is counted as dropped.
+``/diagnostics``. If ``head.joint_states_topic`` is set, it also subscribes to the head's
+``sensor_msgs/JointState``: a fast joint is a hint to the pipeline to expect a big change.
+Image callbacks only hand work over: a worker thread processes the newest pair, and a pair
+that is replaced before the worker takes it is counted as dropped.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from domplane_ros.pipeline import FrameResult, PlanePipeline
 from domplane_ros.ros_io import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros_io import READ_ONLY
 from domplane_ros.sync import ApproximateTimeSync, Pair
+import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -33,8 +36,9 @@ from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterVal
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy)
-from sensor_msgs.msg import Image
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
+                       ReliabilityPolicy)
+from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Float64MultiArray
 
 _EMPTY_ARRAY_KINDS = {'floats': Parameter.Type.DOUBLE_ARRAY}
@@ -73,6 +77,7 @@ class PlaneNode(Node):
         self._period_pairs = 0
         self._period_start = time.monotonic()
         self._qos_warned: set[str] = set()
+        self._joint_speed: tuple[float, float] | None = None  # (rad/s, monotonic receive time)
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         transport = self.config.transport
@@ -91,6 +96,12 @@ class PlaneNode(Node):
                 event_callbacks=SubscriptionEventCallbacks(
                     incompatible_qos=lambda info, s=side: self._on_incompatible_qos(s, info)))
             for side in ('left', 'right')]
+        self._joint_sub = None
+        if self.config.head.joint_states_topic:
+            # Sensor-data QoS matches both reliable and best-effort publishers.
+            self._joint_sub = self.create_subscription(
+                JointState, self.config.head.joint_states_topic, self._on_joint_state,
+                qos_profile_sensor_data)
         self._diag_timer = self.create_timer(transport.diagnostics_period_s,
                                              self._publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name='plane_node_worker',
@@ -179,6 +190,20 @@ class PlaneNode(Node):
                 self._period_pairs += 1
                 self._cv.notify()
 
+    def _on_joint_state(self, msg: JointState) -> None:
+        velocities = np.asarray(msg.velocity, dtype=np.float64)
+        velocities = velocities[np.isfinite(velocities)]
+        if velocities.size == 0:
+            return  # no velocities: no hint
+        self._joint_speed = (float(np.max(np.abs(velocities))), time.monotonic())
+
+    def joint_speed(self) -> float | None:
+        """Return the head's latest largest joint speed in rad/s, or None if none is recent."""
+        latest = self._joint_speed
+        if latest is None or time.monotonic() - latest[1] > self.config.head.max_age_s:
+            return None
+        return latest[0]
+
     # --- Processing ----------------------------------------------------------------------
     def _work(self) -> None:
         while True:
@@ -207,7 +232,8 @@ class PlaneNode(Node):
             return
         with self._lock:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,
-                                           reset=pair.after_reset)
+                                           reset=pair.after_reset,
+                                           joint_speed=self.joint_speed())
         header = pair.left.header
         if result.ok:
             self._pub_h.publish(homography_msg(result.homography))
@@ -242,7 +268,8 @@ class PlaneNode(Node):
             decode_errors=self._counters['decode_errors'], lock_state=self.pipeline.state,
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=self._counters['consecutive_failures'],
-            last_result=self._last_result, last_error=self._last_error)
+            last_result=self._last_result, last_error=self._last_error,
+            joint_speed=self.joint_speed())
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
             level, message, values))

@@ -301,8 +301,8 @@ class PlanePipeline:
             if not estimate.ok:
                 reason = estimate.reason
                 continue
-            reason = self._suspicious(estimate, left_pts.shape[0], size,
-                                      energy=not fast and self._state == LOCKED)
+            # A fast head (joint input) may change the energy legitimately: no energy check.
+            reason = self._suspicious(estimate, left_pts.shape[0], size, energy=not fast)
             if not reason:
                 step.accepted = True
                 self._state = LOCKED
