@@ -242,7 +242,8 @@ class PlanePipeline:
             h = None
             mask = np.zeros(left.shape, np.uint8)
             self.stats.failed += 1
-        self._previous = _Previous(left.copy(), right.copy(), left_pts, right_pts)
+        if not step.keep_previous:
+            self._previous = _Previous(left.copy(), right.copy(), left_pts, right_pts)
         t4 = time.perf_counter()
         timings = {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
                    'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3),
@@ -291,8 +292,10 @@ class PlanePipeline:
         step.prediction = prediction
         if prediction is not None:
             self.stats.predictions += 1
-        starts = [('prediction', prediction)] if prediction is not None else []
-        starts.append(('last', self._last_h))
+        # The last homography is only tried without a prediction: when the cameras moved, it
+        # is stale, and a stale start can slide into a look-alike.
+        starts = [('prediction', prediction) if prediction is not None
+                  else ('last', self._last_h)]
         reason = self._too_few(left_pts, right_pts)
         for name, init in starts if not reason else ():
             wide = fast and prediction is None
@@ -313,7 +316,11 @@ class PlanePipeline:
         self._tracking_frames += 1
         if self._tracking_frames <= cfg.pipeline.max_tracking_frames:
             self._state = TRACKING
-            self._last_h = prediction if prediction is not None else self._last_h
+            if prediction is not None:
+                self._last_h = prediction
+            else:
+                # The carried plane still belongs to the previous frame: track from there.
+                step.keep_previous = True
             return
         self._start_search()
 
@@ -465,6 +472,7 @@ class _Step:
     prediction: np.ndarray | None = None
     candidates: int = 0
     reinitialised: bool = False
+    keep_previous: bool = False
 
 
 def _better(a: PlaneEstimate | FailedEstimate, b: PlaneEstimate | FailedEstimate) -> bool:
