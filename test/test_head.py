@@ -24,7 +24,8 @@ STEP_NS = 33_333_333
 @pytest.fixture(scope='module')
 def fast_sequence():
     """22 frames at 60 deg/s pan and tilt (2 degrees per frame), 12 deg/s vergence."""
-    frames = list(head_sequence(N_FRAMES, 1, HeadMotion.at_speed(60.0), floor='random'))
+    frames = list(head_sequence(N_FRAMES, 1, HeadMotion.at_speed(60.0), floor='random',
+                                supersample=1))
     return [(f, floor_points(f)) for f in frames]
 
 
@@ -85,6 +86,19 @@ def test_relock_within_five_frames_after_a_forced_loss(fast_sequence):
     runs = relock_runs(flags)
     assert runs and max(runs) <= 5, (runs, states)
     assert all(flags[blank + max(runs):])
+
+
+def test_a_longer_drop_out_goes_tracking_then_searching_and_relocks(fast_sequence):
+    blanks = (8, 9, 10)  # longer than pipeline.max_tracking_frames (2)
+    results = _run(PlanePipeline(), fast_sequence, blank_at=blanks)
+    states = [r.state for r, _ in results]
+    assert states[8:11] == [TRACKING, TRACKING, SEARCHING], states
+    flags = [_locked(r, e) for r, e in results]
+    runs = relock_runs(flags)
+    assert len(runs) == 1 and runs[0] <= 5, (runs, states)
+    assert all(flags[8 + runs[0]:])
+    budget = PlaneNodeConfig().pipeline.search_candidates_per_frame
+    assert max(r.candidates for r, _ in results) <= budget
 
 
 def test_relock_after_a_reset_goes_through_the_search(fast_sequence):
