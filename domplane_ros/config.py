@@ -119,7 +119,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     # Pipeline.
     ParamSpec('pipeline.max_energy_ratio', 4.0, 'float',
               'A warm-started estimate whose energy per point exceeds this multiple of the '
-              'last good one triggers a re-initialisation from the prior.', 1.0, 1e6),
+              "last good one is rejected (the 'tracking' state, then the prior search).",
+              1.0, 1e6),
     ParamSpec('pipeline.warm_gnc_start_px', 6.0, 'float',
               'Geman-McClure only: initial GNC scale when warm-starting from the last frame '
               '(the wide estimator.gnc_start_px is used after a re-initialisation).',
@@ -135,9 +136,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'prior.refine_best candidates is spread over frames, keeping the best so far.',
               1, 100),
     ParamSpec('pipeline.fast_joint_velocity', 0.5, 'float',
-              'Head joint speed (largest |velocity| of head/joint_states, rad/s) above which '
-              'a big change is expected: no energy-jump check, and a wide warm-start basin '
-              'when tracking gives no prediction.', 0.0, 1e3),
+              'Head joint speed (largest absolute velocity in the joint states, rad/s) above '
+              'which a big change is expected: no energy-jump check, and a wide warm-start '
+              'basin when tracking gives no prediction.', 0.0, 1e3),
     # Temporal prediction.
     ParamSpec('tracking.enabled', True, 'bool',
               "Warm-start from the last homography moved through both cameras' tracked "

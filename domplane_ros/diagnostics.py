@@ -30,7 +30,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         decode_errors: Images rejected by the decoder.
         lock_state: The pipeline's lock state: ``'locked'``, ``'tracking'`` or
             ``'searching'``.
-        reinitialisations: Frames started from the prior.
+        reinitialisations: Prior searches started.
         consecutive_failures: Processed pairs in a row without a plane.
         last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
         last_error: The last error message ('' if none).

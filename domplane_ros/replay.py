@@ -623,7 +623,7 @@ class ReplaySummary:
         unpaired_at_end: Messages still waiting for a partner at the end of the bag.
         decode_errors: Pairs whose images could not be decoded.
         undecodable_messages: Messages that could not be deserialised.
-        reinitialisations: Frames that started from the prior.
+        reinitialisations: Prior searches started.
         latency_ms: Decode plus processing time of every processed pair, ms.
         wall_s: Wall time of the run, seconds.
         written: Messages written per output topic.
