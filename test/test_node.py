@@ -210,10 +210,10 @@ def test_slow_processing_keeps_newest_pair_and_counts_drops(ros_context, scene):
     processed_stamps = []
     real_process = h.node.pipeline.process
 
-    def slow_process(left, right, stamp_ns, reset=False):
+    def slow_process(left, right, stamp_ns, reset=False, joint_speed=None):
         time.sleep(0.25)
         processed_stamps.append(stamp_ns)
-        return real_process(left, right, stamp_ns, reset)
+        return real_process(left, right, stamp_ns, reset, joint_speed)
 
     h.node.pipeline.process = slow_process
     try:
