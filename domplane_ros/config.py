@@ -144,7 +144,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "Warm-start from the last homography moved through both cameras' tracked "
               'frame-to-frame motion (H_t ~ M_right H_{t-1} M_left^-1); false warm-starts '
               'from the last homography as is.'),
-    ParamSpec('tracking.window_px', 21, 'int',
+    ParamSpec('tracking.max_points', 150, 'int',
+              "Most corners tracked per camera (the previous frame's first, i.e. strongest "
+              'per grid cell).',
+              8, 5000),
+    ParamSpec('tracking.window_px', 15, 'int',
               'Side of the pyramidal Lucas-Kanade window, pixels.', 5, 101),
     ParamSpec('tracking.pyramid_levels', 3, 'int',
               'Pyramid levels of the Lucas-Kanade tracker above full resolution.', 0, 8),
@@ -378,7 +382,8 @@ class TrackingConfig:
     """Temporal prediction settings (see ``tracking.*`` in :data:`PARAMETERS`)."""
 
     enabled: bool = True
-    window_px: int = 21
+    max_points: int = 150
+    window_px: int = 15
     pyramid_levels: int = 3
     forward_backward_px: float = 1.0
     min_tracks: int = 20

@@ -197,7 +197,7 @@ def summarise(records: Sequence[FrameRecord]) -> dict[str, float]:
 
 
 def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
-        methods: Sequence[str] = METHODS, keep_every: int = 0
+        methods: Sequence[str] = METHODS, keep_every: int = 0, supersample: int = 1
         ) -> tuple[list[FrameRecord], list[tuple[str, np.ndarray]]]:
     """Render the sequences and run every method on every frame.
 
@@ -208,6 +208,7 @@ def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
         methods: Methods to run.
         keep_every: Keep an overlay of the ``prediction`` result every this many frames
             (0: none) for the contact sheet.
+        supersample: Rays per pixel along each axis of the renderer.
 
     Returns:
         The per-frame records and ``(label, rgb image)`` overlays.
@@ -227,7 +228,11 @@ def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
     for speed, floor, sequence, count in jobs:
         runners = [MethodRunner(m) for m in methods]
         motion = HeadMotion.at_speed(speed, RATE_HZ)
-        for index, frame in enumerate(head_sequence(count, sequence, motion, floor=floor)):
+        if bar is None:
+            print(f'{speed:g} deg/s, {floor} floor: {count} frames', file=sys.stderr,
+                  flush=True)
+        for index, frame in enumerate(head_sequence(count, sequence, motion, floor=floor,
+                                                    supersample=supersample)):
             points = floor_points(frame)
             for runner in runners:
                 result, ms = runner.process(frame, index)
@@ -383,6 +388,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--methods', default=','.join(METHODS),
                         help='comma-separated warm starts: prediction, last, cold')
     parser.add_argument('--seed', type=int, default=0, help='seed of the first sequence')
+    parser.add_argument('--supersample', type=int, default=1,
+                        help='rays per pixel along each axis of the renderer (default 1)')
     parser.add_argument('--out', default='eval_output/head', help='output folder')
     args = parser.parse_args(argv)
     try:
@@ -393,19 +400,24 @@ def main(argv: list[str] | None = None) -> int:
     bad = [m for m in methods if m not in METHODS]
     if bad or not methods:
         parser.error(f'unknown method {bad[0] if bad else ""!r}; expected {", ".join(METHODS)}')
+    if args.supersample < 1:
+        parser.error('--supersample must be >= 1')
     if args.frames < 3 or not speeds or any(not 0 <= s <= 1000 for s in speeds):
         parser.error('need --frames >= 3 and speeds in [0, 1000] deg/s')
     cv2.setNumThreads(1)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     keep = max(1, args.frames // 3)
-    records, sheet = run(speeds, args.frames, args.seed, methods, keep_every=keep)
+    records, sheet = run(speeds, args.frames, args.seed, methods, keep_every=keep,
+                         supersample=args.supersample)
     text, summaries = table(records, speeds, methods)
     header = (f'# Active head evaluation\n\n{args.frames} frames per speed at {RATE_HZ:g} Hz '
               f'(floors: ' + ', '.join(f'{f} {100 * s:.0f} %' for f, s in FLOORS)
-              + f'), seed {args.seed}; one thread; machine: {machine_name()}\n\n'
+              + f'), seed {args.seed}, 640x480 rendered with {args.supersample}x'
+              f'{args.supersample} rays per pixel; one thread; machine: {machine_name()}\n\n'
               f'Command: python -m domplane_ros.evaluate_head --frames {args.frames} '
-              f'--speeds {args.speeds} --methods {",".join(methods)} --seed {args.seed}\n\n')
+              f'--speeds {args.speeds} --methods {",".join(methods)} --seed {args.seed} '
+              f'--supersample {args.supersample}\n\n')
     (out / 'summary.md').write_text(header + text, encoding='utf-8')
     write_csv(out / 'frames.csv', records)
     plots(out, records, summaries, speeds, methods)

@@ -158,13 +158,19 @@ def camera_motion(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
     Args:
         previous: (H, W) uint8 previous image.
         current: (H, W) uint8 current image.
-        points: (N, 2) float64 points in ``previous`` (its corners).
+        points: (N, 2) float64 points in ``previous`` (its corners, best first); the first
+            ``options.max_points`` of them are tracked.
         options: Tracking settings.
 
     Returns:
         The :class:`CameraMotion`.
 
     """
+    points = np.asarray(points, dtype=np.float64)
+    if points.ndim == 2 and points.shape[0] > options.max_points:
+        # detect_corners lists the strongest corner of every grid cell first, then the
+        # second strongest, ...: the first ones are strong and spread over the image.
+        points = points[:options.max_points]
     source, target = track_points(previous, current, points, options.window_px,
                                   options.pyramid_levels, options.forward_backward_px)
     return fit_camera_motion(source, target, options.min_tracks, options.min_inlier_ratio,
