@@ -131,6 +131,20 @@ def test_search_budget_bounds_the_candidates_refined_per_frame(fast_sequence, bu
     assert sum(per_frame[frames_to_lock:]) == 0  # locked: no more prior candidates
 
 
+def test_fast_joint_hint_widens_the_basin_of_the_last_homography(fast_sequence):
+    """Without tracking, the joint hint's wide first pass keeps the lock at 60 deg/s."""
+    hinted = []
+    plain = []
+    for out, speed in ((hinted, 1.0), (plain, None)):
+        pipeline = PlanePipeline(method_config('last'))
+        for i, (frame, points) in enumerate(fast_sequence):
+            result = pipeline.process(frame.left, frame.right, i * STEP_NS, joint_speed=speed)
+            out.append(_locked(result, transfer_error_px(result.homography, frame, points)))
+    first = hinted.index(True)
+    assert all(hinted[first:]), hinted
+    assert plain.count(False) > hinted.count(False) + 3, (plain, hinted)
+
+
 def test_joint_speed_hint_is_reported_and_validated(fast_sequence):
     pipeline = PlanePipeline()
     frame, _ = fast_sequence[0]
