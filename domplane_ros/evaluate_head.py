@@ -133,6 +133,7 @@ class FrameRecord:
     warm_start: str
     candidates: int
     time_ms: float
+    dropout: bool = False
 
     @property
     def locked(self) -> bool:
@@ -140,31 +141,36 @@ class FrameRecord:
         return self.ok and self.error_px < LOCK_ERROR_PX
 
 
-def relock_runs(locked: Sequence[bool]) -> list[int]:
-    """Return the lengths of the runs of unlocked frames after each loss.
+def relock_runs(locked: Sequence[bool], dropout: Sequence[bool] | None = None) -> list[int]:
+    """Return, for each loss, the frames it took to re-lock.
 
-    Frames before the first locked one are not a loss. A run still open at the end of the
-    sequence counts with its length so far.
+    A loss starts at an unlocked frame after a locked one and ends at the next locked frame;
+    frames before the first locked one are not a loss. Drop-out frames (blank input) in a loss
+    are not counted, so a loss caused by a drop-out counts the frames after the input came
+    back (0 if the first of them is locked). A loss still open at the end of the sequence
+    counts with its length so far.
 
     Args:
         locked: Per-frame lock flags of one sequence, in order.
+        dropout: Per-frame drop-out flags (default: none).
 
     Returns:
-        One run length per loss.
+        One count per loss.
 
     """
     runs = []
-    seen_lock = False
+    seen_lock = in_loss = False
     run = 0
-    for flag in locked:
+    for k, flag in enumerate(locked):
         if flag:
-            if seen_lock and run:
+            if in_loss:
                 runs.append(run)
-            seen_lock = True
-            run = 0
+            seen_lock, in_loss, run = True, False, 0
         elif seen_lock:
-            run += 1
-    if seen_lock and run:
+            in_loss = True
+            if not (dropout is not None and dropout[k]):
+                run += 1
+    if in_loss:
         runs.append(run)
     return runs
 
@@ -181,7 +187,7 @@ def summarise(records: Sequence[FrameRecord]) -> dict[str, float]:
         flags = [r.locked for r in seq]
         first = flags.index(True) if True in flags else len(flags)
         counted.extend(seq[first:])
-        runs.extend(relock_runs(flags))
+        runs.extend(relock_runs(flags, [r.dropout for r in seq]))
     times = np.array([r.time_ms for r in records]) if records else np.zeros(1)
     n = max(len(counted), 1)
     return {
@@ -196,8 +202,23 @@ def summarise(records: Sequence[FrameRecord]) -> dict[str, float]:
     }
 
 
+def dropout_frames(n_frames: int, every: int, lengths: Sequence[int]) -> set[int]:
+    """Return the frame indices replaced by blank input: a drop-out every ``every`` frames.
+
+    The k-th drop-out starts at ``every * k + every // 2`` and lasts ``lengths[k % len]``
+    frames.
+    """
+    out: set[int] = set()
+    if every <= 0 or not lengths:
+        return out
+    for k, start in enumerate(range(every // 2, n_frames, every)):
+        out.update(range(start, min(n_frames, start + lengths[k % len(lengths)])))
+    return out
+
+
 def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
-        methods: Sequence[str] = METHODS, keep_every: int = 0, supersample: int = 1
+        methods: Sequence[str] = METHODS, keep_every: int = 0, supersample: int = 1,
+        dropout_every: int = 0, dropout_lengths: Sequence[int] = (1, 3)
         ) -> tuple[list[FrameRecord], list[tuple[str, np.ndarray]]]:
     """Render the sequences and run every method on every frame.
 
@@ -209,6 +230,9 @@ def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
         keep_every: Keep an overlay of the ``prediction`` result every this many frames
             (0: none) for the contact sheet.
         supersample: Rays per pixel along each axis of the renderer.
+        dropout_every: Replace both images by blank grey input (a camera drop-out) every this
+            many frames (0: never), for ``dropout_lengths`` frames in turn.
+        dropout_lengths: Lengths of the drop-outs, frames.
 
     Returns:
         The per-frame records and ``(label, rgb image)`` overlays.
@@ -231,15 +255,20 @@ def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
         if bar is None:
             print(f'{speed:g} deg/s, {floor} floor: {count} frames', file=sys.stderr,
                   flush=True)
+        blank = dropout_frames(count, dropout_every, dropout_lengths)
         for index, frame in enumerate(head_sequence(count, sequence, motion, floor=floor,
                                                     supersample=supersample)):
             points = floor_points(frame)
+            shown = frame
+            if index in blank:
+                grey = np.full_like(frame.left, 128)
+                shown = replace(frame, left=grey, right=grey.copy())
             for runner in runners:
-                result, ms = runner.process(frame, index)
+                result, ms = runner.process(shown, index)
                 error = transfer_error_px(result.homography, frame, points)
                 records.append(FrameRecord(speed, floor, sequence, index, runner.method,
                                            result.ok, error, result.state, result.warm_start,
-                                           result.candidates, ms))
+                                           result.candidates, ms, index in blank))
                 if (keep_every and runner.method == 'prediction'
                         and index % keep_every == keep_every // 2):
                     label = (f'{speed:g} deg/s {floor} #{index}: '
@@ -390,6 +419,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--seed', type=int, default=0, help='seed of the first sequence')
     parser.add_argument('--supersample', type=int, default=1,
                         help='rays per pixel along each axis of the renderer (default 1)')
+    parser.add_argument('--dropout-every', type=int, default=0,
+                        help='blank both images every N frames (camera drop-outs; 0: none)')
+    parser.add_argument('--dropout-lengths', default='1,3',
+                        help='comma-separated drop-out lengths in frames, used in turn')
     parser.add_argument('--out', default='eval_output/head', help='output folder')
     args = parser.parse_args(argv)
     try:
@@ -408,8 +441,15 @@ def main(argv: list[str] | None = None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     keep = max(1, args.frames // 3)
+    try:
+        lengths = [int(v) for v in args.dropout_lengths.split(',') if v.strip()]
+    except ValueError:
+        parser.error(f'--dropout-lengths must be integers, got {args.dropout_lengths!r}')
+    if args.dropout_every < 0 or any(v < 1 for v in lengths):
+        parser.error('--dropout-every must be >= 0 and drop-out lengths >= 1')
     records, sheet = run(speeds, args.frames, args.seed, methods, keep_every=keep,
-                         supersample=args.supersample)
+                         supersample=args.supersample, dropout_every=args.dropout_every,
+                         dropout_lengths=lengths)
     text, summaries = table(records, speeds, methods)
     header = (f'# Active head evaluation\n\n{args.frames} frames per speed at {RATE_HZ:g} Hz '
               f'(floors: ' + ', '.join(f'{f} {100 * s:.0f} %' for f, s in FLOORS)
@@ -417,7 +457,12 @@ def main(argv: list[str] | None = None) -> int:
               f'{args.supersample} rays per pixel; one thread; machine: {machine_name()}\n\n'
               f'Command: python -m domplane_ros.evaluate_head --frames {args.frames} '
               f'--speeds {args.speeds} --methods {",".join(methods)} --seed {args.seed} '
-              f'--supersample {args.supersample}\n\n')
+              f'--supersample {args.supersample}'
+              + (f' --dropout-every {args.dropout_every} --dropout-lengths '
+                 f'{",".join(map(str, lengths))}' if args.dropout_every else '') + '\n\n'
+              + ('Drop-outs: both images blank (uniform grey) for the given lengths in turn; '
+                 'drop-out frames count as not locked; re-lock frames count the frames after '
+                 'the input came back.\n\n' if args.dropout_every else ''))
     (out / 'summary.md').write_text(header + text, encoding='utf-8')
     write_csv(out / 'frames.csv', records)
     plots(out, records, summaries, speeds, methods)

@@ -10,7 +10,8 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.evaluate_head import floor_points, method_config, relock_runs
+from domplane_ros.evaluate_head import dropout_frames, floor_points, method_config
+from domplane_ros.evaluate_head import relock_runs
 from domplane_ros.evaluate_head import transfer_error_px
 from domplane_ros.pipeline import LOCKED, PlanePipeline, SEARCHING, TRACKING
 from domplane_ros.scene import head_sequence, HeadMotion
@@ -160,3 +161,8 @@ def test_relock_runs_counts_frames_between_losses_and_relocks():
     assert relock_runs([False, False, True, True]) == []
     assert relock_runs([True, False, False, True, False, True]) == [2, 1]
     assert relock_runs([True, True, False, False]) == [2]
+    # Drop-out frames (blank input) do not count: re-lock frames after the input came back.
+    assert relock_runs([True, False, False, False, True],
+                       [False, True, True, False, False]) == [1]
+    assert relock_runs([True, False, True], [False, True, False]) == [0]
+    assert dropout_frames(10, 4, (1, 2)) == {2, 6, 7}
