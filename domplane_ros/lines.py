@@ -22,12 +22,20 @@ potential's rule) lower the joint energy. A segment-aware distance (with a gap t
 non-overlapping segments) would lose this property; segments that are collinear but apart in
 the image lie on one image line, which the homography maps consistently anyway.
 
+**Polarity.** Segments are oriented: LSD orders a segment's endpoints so that the darker
+side is always on the same side of the direction ``p1 -> p2``, and a homography of a plane seen
+from the front by both cameras keeps that orientation. A predicted segment therefore only
+matches right segments of the same polarity (``n_pred . n_k > 0``); this keeps the two edges of
+a dark joint (a few pixels apart, opposite polarities) from being confused. A prediction with
+no same-polarity line among its candidates is unmatched: its distance is
+:data:`UNMATCHED_PX` and its closest position is the prediction itself (no pull).
+
 **Search.** Each right line is keyed by a point in R^4: the foot of the perpendicular from a
-reference point (the centre of the right segments), relative to it, and the doubled direction
-angle ``(cos 2 phi, sin 2 phi)`` scaled by a length in pixels. Both are free of the sign
-ambiguity of ``(n, c)`` (``(-n, -c)`` is the same line): the foot point does not depend on the
-sign, and doubling the angle identifies ``phi`` and ``phi + pi``. Near lines have near keys, so
-a cKDTree returns ``k`` candidates, and the exact pixel distance ``D`` picks the closest of
+reference point (the centre of the right segments), relative to it, and the direction
+``(cos phi, sin phi)`` of the oriented segment scaled by a length in pixels (half the median
+segment length). The foot point does not depend on the sign ambiguity of ``(n, c)``, and the
+oriented direction puts lines of opposite polarity far apart. Near lines have near keys, so a
+cKDTree returns ``k`` candidates, and the exact pixel distance ``D`` picks the closest of
 them. The search is approximate for far lines (the key is not a bound on ``D``); the estimator
 records the energy with the line actually chosen, and its step check keeps that energy
 monotone whatever the search returns.
@@ -47,6 +55,8 @@ from scipy.spatial import cKDTree
 
 # Candidates the tree returns per query before the exact pixel distance decides.
 CANDIDATES = 8
+# Distance reported for a prediction with no same-polarity partner among its candidates.
+UNMATCHED_PX = 1e4
 # Candidates per query when screening prior homographies (cheaper, only a ranking).
 _SCREEN_CANDIDATES = 3
 
@@ -198,14 +208,12 @@ class LineMatcher:
         self.tree = cKDTree(self._keys(self.lines))
 
     def _keys(self, lines: np.ndarray) -> np.ndarray:
-        """Return (N, 4) keys: foot point from the reference, scaled doubled angle."""
+        """Return (N, 4) keys: foot point from the reference, scaled oriented direction."""
         n = lines[:, 0:2]
         dist = n @ self.reference + lines[:, 2]
         foot = -dist[:, None] * n
-        # Direction (b, -a); doubled angle from the normal gives the same up to a sign.
-        cos2 = n[:, 0] * n[:, 0] - n[:, 1] * n[:, 1]
-        sin2 = 2.0 * n[:, 0] * n[:, 1]
-        return np.column_stack([foot, -self.angle_scale * cos2, -self.angle_scale * sin2])
+        # The oriented direction is (b, -a) for the unit normal (a, b).
+        return np.column_stack([foot, self.angle_scale * n[:, 1], -self.angle_scale * n[:, 0]])
 
     def closest(self, x1: np.ndarray, x2: np.ndarray, candidates: int = CANDIDATES
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -218,8 +226,9 @@ class LineMatcher:
 
         Returns:
             ``(D, idx, c1, c2)``: (N,) distances ``sqrt(d(x1)^2 + d(x2)^2)`` in pixels, (N,)
-            int64 indices of the closest right lines, and (N, 2) projections of ``x1`` and
-            ``x2`` onto those lines.
+            int64 indices of the closest right lines of the same polarity, and (N, 2)
+            projections of ``x1`` and ``x2`` onto those lines. Without a same-polarity
+            candidate: ``D = UNMATCHED_PX`` and the projections are the predictions.
 
         """
         n = x1.shape[0]
@@ -235,24 +244,30 @@ class LineMatcher:
         cand = self.lines[idx]  # (N, k, 3)
         d1 = cand[:, :, 0] * x1[:, 0:1] + cand[:, :, 1] * x1[:, 1:2] + cand[:, :, 2]
         d2 = cand[:, :, 0] * x2[:, 0:1] + cand[:, :, 1] * x2[:, 1:2] + cand[:, :, 2]
-        dist2 = d1 * d1 + d2 * d2
+        same = (cand[:, :, 0] * query_lines[:, 0:1] + cand[:, :, 1] * query_lines[:, 1:2]) > 0
+        dist2 = np.where(same, d1 * d1 + d2 * d2, np.inf)
         best = np.argmin(dist2, axis=1)
         rows = np.arange(n)
         chosen = idx[rows, best].astype(np.int64)
         line = self.lines[chosen]
-        e1 = d1[rows, best]
-        e2 = d2[rows, best]
+        found = same[rows, best]
+        e1 = np.where(found, d1[rows, best], 0.0)
+        e2 = np.where(found, d2[rows, best], 0.0)
         c1 = x1 - e1[:, None] * line[:, 0:2]
         c2 = x2 - e2[:, None] * line[:, 0:2]
-        return np.sqrt(dist2[rows, best]), chosen, c1, c2
+        dist = np.where(found, np.sqrt(np.where(found, dist2[rows, best], 0.0)), UNMATCHED_PX)
+        return dist, chosen, c1, c2
 
     def brute_force(self, x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Return the exact ``(D, idx)`` by trying every right line (for checks and tests)."""
         d1 = x1 @ self.lines[:, 0:2].T + self.lines[:, 2]
         d2 = x2 @ self.lines[:, 0:2].T + self.lines[:, 2]
-        dist2 = d1 * d1 + d2 * d2
+        query = segment_lines(np.concatenate([x1, x2], axis=1))
+        same = query[:, 0:2] @ self.lines[:, 0:2].T > 0
+        dist2 = np.where(same, d1 * d1 + d2 * d2, np.inf)
         idx = np.argmin(dist2, axis=1)
-        return np.sqrt(dist2[np.arange(x1.shape[0]), idx]), idx.astype(np.int64)
+        best = dist2[np.arange(x1.shape[0]), idx]
+        return np.where(np.isfinite(best), np.sqrt(best), UNMATCHED_PX), idx.astype(np.int64)
 
 
 def screen_line_candidates(candidates: np.ndarray, left_segments: np.ndarray,
@@ -301,4 +316,3 @@ def line_transfer_px(homography: np.ndarray, left_segments: np.ndarray,
     d1 = np.einsum('ij,ij->i', mapped[:, 0:2], right_lines[:, 0:2]) + right_lines[:, 2]
     d2 = np.einsum('ij,ij->i', mapped[:, 2:4], right_lines[:, 0:2]) + right_lines[:, 2]
     return np.sqrt(0.5 * (d1 * d1 + d2 * d2))
-
