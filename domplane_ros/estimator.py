@@ -38,6 +38,8 @@ from scipy.spatial import cKDTree
 _GLOBAL_STEP_ITERATIONS = 2
 _POLISH_ROUNDS = 2
 _POLISH_STEPS = 2
+_LINE_POLISH_ROUNDS = 12
+_LINE_POLISH_TOLERANCE_PX = 1e-3
 OVER_RELAXATION = 0.5
 
 
@@ -269,7 +271,10 @@ class _TwoStep:
 
         """
         pred, r, idx, closest = matched
-        for _ in range(_POLISH_ROUNDS):
+        # With segments the targets (projections onto the matched lines) move with H, so the
+        # refit is repeated until the predictions settle, not only until the matches do.
+        rounds = _POLISH_ROUNDS if self.n_lines == 0 else _LINE_POLISH_ROUNDS
+        for _ in range(rounds):
             inl = r < threshold_px
             if np.count_nonzero(inl) < 8:
                 break
@@ -285,8 +290,9 @@ class _TwoStep:
             r_new, idx_new, closest_new = self.match(pred_new)
             same = np.array_equal(idx_new[inl], idx[inl]) and np.array_equal(
                 r_new < threshold_px, inl)
+            settled = float(np.max(np.abs(pred_new - pred))) < _LINE_POLISH_TOLERANCE_PX
             h, pred, r, idx, closest = h_new, pred_new, r_new, idx_new, closest_new
-            if same:
+            if same and (self.n_lines == 0 or settled):
                 break
         return h, r, idx
 
