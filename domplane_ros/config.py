@@ -75,7 +75,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('estimator.threshold_px', 3.0, 'float',
               'Robust threshold (truncation, Huber corner, Geman-McClure scale) in pixels; '
               'points farther than this from every partner are off the plane.', 0.1, 200.0),
-    ParamSpec('estimator.line_weight', 1.0, 'float',
+    ParamSpec('estimator.line_weight', 3.0, 'float',
               'Weight of a line segment relative to a point in the joint energy (features.kind '
               'both).', 0.01, 100.0),
     ParamSpec('estimator.gnc_start_px', 24.0, 'float',
@@ -286,7 +286,7 @@ class EstimatorConfig:
     potential: str = 'truncated_quadratic'
     lambda_weight: float = 0.8
     threshold_px: float = 3.0
-    line_weight: float = 1.0
+    line_weight: float = 3.0
     gnc_start_px: float = 24.0
     gnc_factor: float = 0.5
     max_iterations: int = 60

@@ -57,8 +57,10 @@ from scipy.spatial import cKDTree
 CANDIDATES = 8
 # Distance reported for a prediction with no same-polarity partner among its candidates.
 UNMATCHED_PX = 1e4
-# Candidates per query when screening prior homographies (cheaper, only a ranking).
+# Candidates per query, and the longest left segments used, when screening prior homographies
+# (cheaper: it only ranks the candidates).
 _SCREEN_CANDIDATES = 3
+SCREEN_SEGMENTS = 60
 
 
 def as_segments(segments: Any, name: str = 'segments') -> np.ndarray:
@@ -276,7 +278,8 @@ def screen_line_candidates(candidates: np.ndarray, left_segments: np.ndarray,
 
     The energy of a candidate is ``sum_i min(D_i, t)^2`` with ``D_i`` the distance of the
     predicted left segment ``i`` to its closest right line, the line analogue of
-    :func:`domplane_ros.prior.screen_candidates`.
+    :func:`domplane_ros.prior.screen_candidates`. Only the :data:`SCREEN_SEGMENTS` longest
+    segments take part (the ranking needs no more, and the search is the cost).
 
     Args:
         candidates: (M, 3, 3) float64 homographies.
@@ -288,6 +291,9 @@ def screen_line_candidates(candidates: np.ndarray, left_segments: np.ndarray,
         (M,) float64 screening energies.
 
     """
+    if left_segments.shape[0] > SCREEN_SEGMENTS:
+        longest = np.argsort(-segment_lengths(left_segments))[:SCREEN_SEGMENTS]
+        left_segments = left_segments[longest]
     m = candidates.shape[0]
     n = left_segments.shape[0]
     ends = endpoints(left_segments)
