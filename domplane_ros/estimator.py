@@ -17,6 +17,15 @@ point if that is cheaper under the new ``H``. With graduated non-convexity the e
 with the scale, so monotonicity holds within each stage (``stage_trace`` says which).
 
 After convergence, a Euclidean refinement fits ``H`` to the inliers' closest points.
+
+Line segments (:mod:`domplane_ros.lines`) enter the same iteration: a left segment's two
+endpoints are predicted by ``H``, its closest right line is the one nearest in the pixel
+distance ``D = sqrt(d(x1)^2 + d(x2)^2)`` of the predicted endpoints to that (infinite) line,
+and its auxiliary variables are two points, the predicted endpoints moved toward their
+projections onto that line by the potential's rule (``s = step(D)``). The global step is the
+same weighted least-squares fit from left points and endpoints to their auxiliary points. With
+points and lines together the energy is ``sum over points + line_weight * sum over segments``,
+and every step lowers it, so the same monotonicity holds.
 """
 
 from __future__ import annotations

@@ -42,9 +42,9 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
 import cv2  # noqa: E402
 from domplane_ros.bench import machine_name  # noqa: E402
 from domplane_ros.config import FeatureConfig, PlaneNodeConfig  # noqa: E402
-from domplane_ros.evaluate import (CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX,  # noqa: E402
-                                   chessboard_corners, chessboard_pairs, default_data_dir,
-                                   KITTI_DIR, KITTI_PRIOR, KITTI_ROI, kitti_reference,
+from domplane_ros.evaluate import (chessboard_corners, chessboard_pairs,  # noqa: E402
+                                   CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX, default_data_dir,
+                                   KITTI_DIR, KITTI_PRIOR, kitti_reference, KITTI_ROI,
                                    mean_transfer_px, OPENCV_DIR, RENDERED_PRIOR,
                                    run_orb_magsac, SOLVED_PX)
 from domplane_ros.homography import apply_homography  # noqa: E402
