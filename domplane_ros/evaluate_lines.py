@@ -73,6 +73,7 @@ class LineCase:
         left: (H, W) uint8 left image, for the pictures.
         errors: Mean transfer error per method, pixels (inf on failure).
         times_ms: Time per method (cold start for ours), milliseconds.
+        warm_ms: Ours only: time on the same pair again, warm-started from the cold result.
         inliers: Inlier features (ours: corners + segments) or matches (baseline) per method.
         features: Left corners + segments (ours) or matches (baseline) per method.
         results: The pipeline's results per method (ours only), for the pictures.
@@ -84,6 +85,7 @@ class LineCase:
     left: np.ndarray
     errors: dict[str, float] = field(default_factory=dict)
     times_ms: dict[str, float] = field(default_factory=dict)
+    warm_ms: dict[str, float] = field(default_factory=dict)
     inliers: dict[str, int] = field(default_factory=dict)
     features: dict[str, str] = field(default_factory=dict)
     results: dict[str, FrameResult] = field(default_factory=dict)
@@ -114,9 +116,13 @@ def run_methods(case: LineCase, left: np.ndarray, right: np.ndarray,
     """
     for kind in METHODS[:3]:
         cfg = replace(config, features=replace(config.features, kind=kind))
+        pipeline = PlanePipeline(cfg)
         start = time.perf_counter()
-        result = PlanePipeline(cfg).process(left, right, 0)
-        case.times_ms[kind] = 1e3 * (time.perf_counter() - start)
+        result = pipeline.process(left, right, 0)
+        middle = time.perf_counter()
+        pipeline.process(left, right, 1)
+        case.times_ms[kind] = 1e3 * (middle - start)
+        case.warm_ms[kind] = 1e3 * (time.perf_counter() - middle)
         case.errors[kind] = mean_transfer_px(result.homography, points, target)
         case.inliers[kind] = result.n_inliers if result.ok else 0
         case.features[kind] = f'{result.left_points.shape[0]}+{result.left_lines.shape[0]}'
@@ -124,6 +130,7 @@ def run_methods(case: LineCase, left: np.ndarray, right: np.ndarray,
             case.results[kind] = result
     orb = run_orb_magsac(left, right, config.features.roi, repeats=1)
     case.times_ms['orb_magsac'] = orb.time_ms
+    case.warm_ms['orb_magsac'] = math.nan
     case.errors['orb_magsac'] = mean_transfer_px(orb.homography, points, target)
     case.inliers['orb_magsac'] = orb.n_inliers
     case.features['orb_magsac'] = str(orb.n_points)
@@ -210,12 +217,15 @@ def summary_rows(cases: Sequence[LineCase]) -> list[list[str]]:
             solved = np.array([c.solved(method) for c in group])
             good = errors[solved]
             times = np.array([c.times_ms[method] for c in group])
+            warm = np.array([c.warm_ms[method] for c in group])
             rows.append([
                 scene_class.replace('_', ' '), METHOD_NAMES[method],
                 f'{int(solved.sum())} / {len(group)} ({100.0 * solved.mean():.0f} %)',
                 f'{np.median(good):.2f}' if good.size else '-',
                 _fmt_px(float(np.median(errors))),
-                f'{np.median(times):.0f} (p95 {np.percentile(times, 95):.0f})'])
+                f'{np.median(times):.0f} (p95 {np.percentile(times, 95):.0f})',
+                '-' if np.all(np.isnan(warm)) else
+                f'{np.nanmedian(warm):.1f} (p95 {np.nanpercentile(warm, 95):.1f})'])
     return rows
 
 
@@ -226,7 +236,7 @@ def _fmt_px(value: float) -> str:
 def markdown_table(rows: Sequence[Sequence[str]]) -> str:
     """Return the summary rows as a markdown table."""
     header = ['scene class', 'method', 'solved', 'error of solved, median px',
-              'error, median px', 'time, median ms']
+              'error, median px', 'cold time, median ms', 'warm time, median ms']
     lines = ['| ' + ' | '.join(header) + ' |', '|' + '---|' * len(header)]
     lines += ['| ' + ' | '.join(row) + ' |' for row in rows]
     return '\n'.join(lines) + '\n'
@@ -256,12 +266,12 @@ def write_csv(path: Path, cases: Sequence[LineCase]) -> None:
     with open(path, 'w', newline='', encoding='utf-8') as stream:
         writer = csv.writer(stream)
         writer.writerow(['scene_class', 'pair', 'method', 'error_px', 'solved', 'time_ms',
-                         'inliers', 'features'])
+                         'warm_ms', 'inliers', 'features'])
         for c in cases:
             for m in METHODS:
                 writer.writerow([c.scene_class, c.pair, m, f'{c.errors[m]:.4f}',
-                                 int(c.solved(m)), f'{c.times_ms[m]:.2f}', c.inliers[m],
-                                 c.features[m]])
+                                 int(c.solved(m)), f'{c.times_ms[m]:.2f}',
+                                 f'{c.warm_ms[m]:.2f}', c.inliers[m], c.features[m]])
 
 
 def success_plot(path: Path, cases: Sequence[LineCase]) -> None:
@@ -310,16 +320,34 @@ def success_plot(path: Path, cases: Sequence[LineCase]) -> None:
     plt.close(fig)
 
 
-def contact_sheet(path: Path, cases: Sequence[LineCase], count: int = 8) -> None:
-    """Write points-only vs points + lines overlays for low-texture scenes (and KITTI)."""
+def pick_cases(cases: Sequence[LineCase], per_class: int = 4) -> list[LineCase]:
+    """Pick low-texture cases for the contact sheet: where points + lines and points differ.
+
+    Per class: scenes solved by points + lines but not by points first, then scenes that
+    points + lines fails (so the sheet shows failures too), then the rest; and KITTI.
+    """
+    picked = []
+    for scene_class in PLAIN_FLOOR_KINDS + ('kitti',):
+        group = [c for c in cases if c.scene_class == scene_class and c.results]
+        wins = [c for c in group if c.solved('both') and not c.solved('points')]
+        fails = [c for c in group if not c.solved('both')]
+        rest = [c for c in group if c not in wins and c not in fails]
+        count = 1 if scene_class == 'kitti' else per_class
+        picked += (wins[:count - 1] + fails[:1] + wins[count - 1:] + rest)[:count]
+    return picked
+
+
+def contact_sheet(path: Path, cases: Sequence[LineCase]) -> None:
+    """Write points-only vs points + lines overlays for low-texture scenes and KITTI."""
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot as plt
 
-    shown = [c for c in cases if c.results][:count]
+    shown = pick_cases(cases)
     if not shown:
         return
-    fig, axes = plt.subplots(len(shown), 2, figsize=(11, 3.4 * len(shown)), squeeze=False)
+    fig, axes = plt.subplots(len(shown), 2, figsize=(10, 3.3 * len(shown) + 0.5),
+                             squeeze=False)
     for row, case in zip(axes, shown):
         for ax, method in zip(row, ('points', 'both')):
             result = case.results[method]
@@ -335,7 +363,7 @@ def contact_sheet(path: Path, cases: Sequence[LineCase], count: int = 8) -> None
                          fontsize=9)
     fig.suptitle('green = plane, red = obstacle; cyan = inlier corners (o) and segments, '
                  'magenta = outliers', fontsize=10)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / (3.3 * len(shown) + 0.5)))
     fig.savefig(path, dpi=80)
     plt.close(fig)
 

@@ -15,6 +15,7 @@ def _case(scene_class, errors):
     for method, error in zip(METHODS, errors):
         case.errors[method] = error
         case.times_ms[method] = 10.0
+        case.warm_ms[method] = 2.0
         case.inliers[method] = 5
         case.features[method] = '5'
     return case
