@@ -307,18 +307,3 @@ def map_segments(homography: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Map (N, 4) segments' endpoints through a homography, giving (N, 4) segments."""
     return apply_homography(homography, endpoints(segments)).reshape(-1, 4)
 
-
-def line_transfer_px(homography: np.ndarray, left_segments: np.ndarray,
-                     right_lines: np.ndarray) -> np.ndarray:
-    """Return (N,) RMS distances of mapped left endpoints to their paired right lines.
-
-    Args:
-        homography: (3, 3) float64.
-        left_segments: (N, 4) float64 segments.
-        right_lines: (N, 3) float64 unit-normal lines paired row by row.
-
-    """
-    mapped = map_segments(homography, left_segments)
-    d1 = np.einsum('ij,ij->i', mapped[:, 0:2], right_lines[:, 0:2]) + right_lines[:, 2]
-    d2 = np.einsum('ij,ij->i', mapped[:, 2:4], right_lines[:, 0:2]) + right_lines[:, 2]
-    return np.sqrt(0.5 * (d1 * d1 + d2 * d2))
