@@ -306,4 +306,3 @@ def screen_line_candidates(candidates: np.ndarray, left_segments: np.ndarray,
 def map_segments(homography: np.ndarray, segments: np.ndarray) -> np.ndarray:
     """Map (N, 4) segments' endpoints through a homography, giving (N, 4) segments."""
     return apply_homography(homography, endpoints(segments)).reshape(-1, 4)
-
