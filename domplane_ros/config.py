@@ -65,6 +65,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Maximum number of line segments detected per image (lines and both).', 4, 2000),
     ParamSpec('features.min_line_length_px', 25.0, 'float',
               'Line segments shorter than this are dropped, in pixels.', 4.0, 1000.0),
+    ParamSpec('features.line_scale', 0.8, 'float',
+              'Image scale at which the line segment detector runs (LSD scale; smaller is '
+              'faster and less precise).', 0.2, 1.0),
     # Estimator.
     ParamSpec('estimator.potential', 'truncated_quadratic', 'str',
               'Robust potential: least_squares, truncated_quadratic, huber or '
@@ -270,6 +273,7 @@ class FeatureConfig:
     kind: str = 'points'
     max_lines: int = 150
     min_line_length_px: float = 25.0
+    line_scale: float = 0.8
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""

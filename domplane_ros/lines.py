@@ -143,13 +143,15 @@ def detect_lines(gray: np.ndarray, config: FeatureConfig,
     """Detect straight line segments spread over a grid of cells.
 
     OpenCV's line segment detector (LSD, ``cv2.createLineSegmentDetector``, in the headless
-    wheel since OpenCV 4.5.1) runs on the region of interest; segments shorter than
+    wheel since OpenCV 4.5.1) runs on the region of interest at ``config.line_scale`` (its
+    Gaussian down-scaling; coordinates are returned at full resolution); segments shorter than
     ``config.min_line_length_px`` are dropped, and the rest are taken round-robin over the
     ``grid_rows x grid_cols`` cells (by midpoint), longest first, up to ``config.max_lines``.
 
     Args:
         gray: (H, W) uint8 image.
-        config: ``min_line_length_px``, ``max_lines``, the grid and the default ``roi``.
+        config: ``min_line_length_px``, ``max_lines``, ``line_scale``, the grid and the
+            default ``roi``.
         roi: Optional ``(x0, y0, x1, y1)`` region of interest as fractions; overrides
             ``config.roi``. Segments are clipped to it.
 
@@ -167,7 +169,7 @@ def detect_lines(gray: np.ndarray, config: FeatureConfig,
     empty = np.zeros((0, 4), np.float64)
     if x1 - x0 < 8 or y1 - y0 < 8:
         return empty
-    detector = cv2.createLineSegmentDetector()
+    detector = cv2.createLineSegmentDetector(cv2.LSD_REFINE_STD, config.line_scale)
     found = detector.detect(np.ascontiguousarray(gray[y0:y1, x0:x1]))[0]
     if found is None:
         return empty
