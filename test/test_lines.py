@@ -57,6 +57,16 @@ def test_detect_lines_shape_length_cap_and_spread(tiles):
     assert np.mean(dist < 1.0) > 0.6
 
 
+def test_line_scale_trades_precision_for_speed_but_still_finds_the_joints(tiles):
+    coarse = FeatureConfig(line_scale=0.5)
+    left = detect_lines(tiles.left, coarse)
+    right = detect_lines(tiles.right, coarse)
+    assert left.shape[0] > 50
+    pred = map_segments(tiles.homography, left)
+    dist, _ = LineMatcher(right).brute_force(pred[:, 0:2], pred[:, 2:4])
+    assert np.mean(dist < 1.5) > 0.5
+
+
 def test_detect_lines_honours_roi_and_flat_image(tiles):
     seg = detect_lines(tiles.left, FeatureConfig(roi=(0.0, 0.5, 1.0, 1.0)))
     assert seg.shape[0] > 10
