@@ -133,21 +133,23 @@ class PairChecks:
             counts['size_mismatch'] += 1
             refused = (f'left and right images differ in size: left {_size(left.shape)}, '
                        f'right {_size(right.shape)}')
-        digests = (_digest(left), _digest(right))
-        previous, self._last_digests = self._last_digests, digests
-        if not refused and previous is not None:
-            same = [digests[i] == previous[i] for i in (0, 1)]
-            if same[0] != same[1]:
-                counts['frozen_camera'] += 1
-                frozen, moving = ('left', 'right') if same[0] else ('right', 'left')
-                refused = (f'{frozen} camera frozen: its image is identical to its previous '
-                           f'one while the {moving} image changed')
         if not refused:
             for gray, side in ((left, 'left'), (right, 'right')):
                 refused = clipped_reason(gray, side, self.max_clipped_fraction)
                 if refused:
                     counts['clipped'] += 1
                     break
+        # A frozen camera: compared with the previous pair that passed the checks above.
+        previous, self._last_digests = self._last_digests, None
+        if not refused:
+            digests = (_digest(left), _digest(right))
+            self._last_digests = digests
+            same = previous is not None and [digests[i] == previous[i] for i in (0, 1)]
+            if same and same[0] != same[1]:
+                counts['frozen_camera'] += 1
+                frozen, moving = ('left', 'right') if same[0] else ('right', 'left')
+                refused = (f'{frozen} camera frozen: its image is identical to its previous '
+                           f'one while the {moving} image changed')
         return PairCheck(refused, reset, tuple(warnings))
 
 
@@ -324,9 +326,9 @@ class Throttle:
 
 
 def problem_key(message: str) -> str:
-    """Return a message's throttling key: its text up to the first colon or digit."""
+    """Return a message's throttling key: its text up to the first colon, without numbers."""
     head = message.split(':', 1)[0]
-    return ''.join(ch for ch in head if not ch.isdigit()).strip()
+    return ' '.join(''.join(ch for ch in head if ch not in '0123456789.+-').split())
 
 
 def input_diagnostic_values(*counts: Mapping[str, int]) -> list[tuple[str, str]]:
