@@ -12,7 +12,6 @@ import os
 from pathlib import Path
 import subprocess
 import sys
-import time
 
 import cv2
 from domplane_ros.health import INPUT_COUNTER_NAMES
@@ -31,45 +30,70 @@ BIN = Path(sys.executable).parent
 
 # --- Random messages into the image callback ---------------------------------------------
 
-_ENCODINGS = st.one_of(st.sampled_from(['mono8', 'rgb8', 'bgra8', 'mono16', '8UC3']),
-                       st.text(max_size=6))
+_CHANNELS = {'mono8': 1, 'mono16': 2, 'rgb8': 3, '8UC3': 3, 'bgra8': 4}
+_ENCODINGS = st.one_of(st.sampled_from(sorted(_CHANNELS)), st.text(max_size=6))
 
 
-@st.composite
-def image_messages(draw, shape=None):
-    """A sensor_msgs/Image with random fields; often consistent, sometimes not."""
-    msg = Image()
-    msg.encoding = draw(_ENCODINGS)
-    height, width = shape if shape is not None else (draw(st.integers(0, 40)),
-                                                     draw(st.integers(0, 40)))
-    msg.height, msg.width = height, width
-    channels = {'mono8': 1, 'mono16': 2, 'rgb8': 3, '8UC3': 3, 'bgra8': 4}.get(msg.encoding, 1)
-    msg.step = draw(st.one_of(st.just(width * channels), st.integers(0, 200)))
-    msg.is_bigendian = draw(st.integers(0, 1))
-    length = draw(st.one_of(st.just(height * msg.step), st.integers(0, 2000)))
-    seed = draw(st.integers(0, 2**32 - 1))
-    flat = draw(st.sampled_from(['random', 'zeros', 'saturated']))
-    if flat == 'random':
-        data = np.random.default_rng(seed).integers(0, 256, length, dtype=np.uint8)
-    else:
-        data = np.full(length, 0 if flat == 'zeros' else 255, np.uint8)
-    msg.data = data.tobytes()
-    stamp_ns = draw(st.one_of(st.just(0), st.integers(-2**62, 2**62),
-                              st.integers(1_700_000_000 * 10**9, 1_700_000_100 * 10**9)))
+def _set_stamp(msg, stamp_ns):
     stamp_ns = max(min(stamp_ns, (2**31 - 1) * 10**9), -(2**31) * 10**9)
     msg.header.stamp.sec = stamp_ns // 10**9
     msg.header.stamp.nanosec = stamp_ns % 10**9
-    return msg
 
 
 @st.composite
-def message_streams(draw):
-    """1-8 messages on random sides; half the time left and right share one shape."""
-    shape = None
-    if draw(st.booleans()):
-        shape = (draw(st.integers(1, 48)), draw(st.integers(1, 48)))
-    return [(draw(st.sampled_from(['left', 'right'])), draw(image_messages(shape)))
-            for _ in range(draw(st.integers(1, 8)))]
+def image_messages(draw, shape, stamp_ns, scene_image=None):
+    """Draw a sensor_msgs/Image: a random or ``scene_image``, with valid or random fields."""
+    msg = Image()
+    _set_stamp(msg, stamp_ns)
+    if scene_image is not None and draw(st.integers(0, 2)) > 0:
+        msg.height, msg.width = scene_image.shape
+        msg.encoding, msg.step = 'mono8', scene_image.shape[1]
+        msg.data = scene_image.tobytes()
+        return msg
+    valid = draw(st.integers(0, 3)) > 0
+    msg.encoding = draw(st.sampled_from(sorted(_CHANNELS)) if valid else _ENCODINGS)
+    height, width = shape if valid else (draw(st.integers(0, 40)), draw(st.integers(0, 40)))
+    msg.height, msg.width = height, width
+    row = width * _CHANNELS.get(msg.encoding, 1)
+    msg.step = row + draw(st.integers(0, 3)) if valid else draw(st.integers(0, 200))
+    msg.is_bigendian = draw(st.integers(0, 1))
+    length = height * msg.step if valid else draw(st.integers(0, 2000))
+    content = draw(st.sampled_from(['noise', 'blocks', 'zeros', 'saturated']))
+    rng = np.random.default_rng(draw(st.integers(0, 2**32 - 1)))
+    if content == 'noise':
+        data = rng.integers(0, 256, length, dtype=np.uint8)
+    elif content == 'blocks':   # a few large squares: corners, maybe collinear or clustered
+        data = np.repeat(rng.integers(0, 256, length // 64 + 1, dtype=np.uint8), 64)[:length]
+    else:
+        data = np.full(length, 0 if content == 'zeros' else 255, np.uint8)
+    msg.data = data.tobytes()
+    return msg
+
+
+_STAMPS = st.one_of(st.just(0), st.integers(-2**62, 2**62),
+                    st.integers(1_700_000_000 * 10**9, 1_700_000_100 * 10**9))
+
+
+@st.composite
+def message_streams(draw, scene_pair):
+    """1-5 stereo pairs (random stamps, jitter, order) and sometimes a lone message."""
+    shape = (draw(st.integers(1, 120)), draw(st.integers(1, 160)))
+    use_scene = draw(st.booleans())
+    left_scene, right_scene = scene_pair if use_scene else (None, None)
+    stream = []
+    for _ in range(draw(st.integers(1, 5))):
+        stamp = draw(_STAMPS)
+        jitter = draw(st.one_of(st.just(0), st.integers(-5_000_000, 5_000_000)))
+        right_shape = shape if draw(st.integers(0, 4)) else (shape[0], shape[1] + 1)
+        pair = [('left', draw(image_messages(shape, stamp, left_scene))),
+                ('right', draw(image_messages(right_shape, stamp + jitter, right_scene)))]
+        if draw(st.booleans()):
+            pair.reverse()
+        stream += pair
+        if draw(st.integers(0, 4)) == 0:
+            stream.append((draw(st.sampled_from(['left', 'right'])),
+                           draw(image_messages(shape, draw(_STAMPS)))))
+    return stream
 
 
 class _Recorder:
@@ -105,8 +129,14 @@ def _check_published(homographies, masks, diagnostics):
             assert math.isfinite(value), (kv.key, kv.value)
 
 
-def test_random_messages_never_escape_or_publish_invalid_values(ros_context):
-    node = PlaneNode(context=ros_context, parameter_overrides=[
+def test_random_messages_never_escape_or_publish_invalid_values(ros_context, scene):  # noqa
+    # The scene at a quarter of its size (and the prior scaled to it) gives planes too.
+    scene_pair = tuple(cv2.resize(img, (160, 120), interpolation=cv2.INTER_AREA)
+                       for img in (scene.left, scene.right))
+    overrides = [p for p in _prior_overrides(scene) if p.name != 'prior.focal_px']
+    focal = scene.setup.focal_px / 4
+    node = PlaneNode(context=ros_context, parameter_overrides=overrides + [
+        Parameter('prior.focal_px', value=[0.8 * focal, 1.2 * focal]),
         Parameter('features.block_size', value=3), Parameter('sync.slop_s', value=1e-3)])
     # Stop the worker: the test runs the worker's step itself so that any exception escapes.
     with node._cv:
@@ -117,7 +147,7 @@ def test_random_messages_never_escape_or_publish_invalid_values(ros_context):
 
     @settings(max_examples=80, deadline=None,
               suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
-    @given(stream=message_streams())
+    @given(stream=message_streams(scene_pair))
     def feed(stream):
         for side, msg in stream:
             node._on_image(side, msg)
@@ -131,6 +161,8 @@ def test_random_messages_never_escape_or_publish_invalid_values(ros_context):
         _check_published(*(r.messages for r in recorders))
         assert node._counters['processed'] > 0 and node._counters['decode_errors'] > 0
         assert recorders[2].messages
+        assert recorders[0].messages, 'some random streams should hold planes'
+        assert node._counters['internal_errors'] == 0
     finally:
         node.destroy_node()
 
