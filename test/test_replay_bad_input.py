@@ -20,7 +20,7 @@ def test_replay_refuses_a_frozen_camera_and_counts_it(tmp_path, frames):  # noqa
     assert any('input problems:  pairs refused: camera frozen 1' in line
                for line in summary.lines())
     bag = read_bag(tmp_path / 'out')['messages']
-    masks = {t: m for t, m in bag['/plane/mask']}
+    masks = dict(bag['/plane/mask'])
     homography_stamps = {t for t, _ in bag.get('/plane/homography', [])}
     for bad in (4, 6):
         assert not np.asarray(masks[_left_stamp(bad)].data).any()
