@@ -32,7 +32,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         lock_state: The pipeline's lock state.
         reinitialisations: Frames started from the prior.
         consecutive_failures: Processed pairs in a row without a plane.
-        last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
+        last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None (also
+            when the last pair could not be decoded).
         last_error: The last error message ('' if none).
         input_counts: Counts of input problems (see :mod:`domplane_ros.health`), summed and
             shown one key per kind.
@@ -48,13 +49,15 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
     """
     lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
     result = last_result
+    # The last pair's failure: the pipeline's reason, or (no result: it was not decoded) the
+    # last error.
+    reason = result.reason if result is not None and not result.ok else last_error
     if rate == 0.0:
         level, message = WARN, 'no stereo pairs received'
     elif consecutive_failures >= FAILURES_FOR_ERROR:
-        level, message = ERROR, f'no plane for {consecutive_failures} pairs: ' + (
-            result.reason if result is not None else '')
-    elif result is not None and not result.ok:
-        level, message = WARN, f'no plane: {result.reason}'
+        level, message = ERROR, f'no plane for {consecutive_failures} pairs: {reason}'
+    elif consecutive_failures > 0 or (result is not None and not result.ok):
+        level, message = WARN, f'no plane: {reason}'
     else:
         level, message = OK, 'plane ' + lock_state
     if input_warning:

@@ -222,8 +222,10 @@ class PlaneNode(Node):
             right = message_to_gray(pair.right)
         except ImageDecodeError as err:
             self._counters['decode_errors'] += 1
+            self._counters['consecutive_failures'] += 1
             self._decode_counts['decode_' + err.kind] += 1
             self._last_error = f'image rejected: {err}'
+            self._last_result = None
             if self._throttle.due('decode ' + err.kind, time.monotonic()):
                 self.get_logger().error(self._last_error)
             return

@@ -270,8 +270,10 @@ class ReplaySession:
             left, result = process_pair(self.pipeline, pair)
         except ImageDecodeError as err:
             self.counters.decode_errors += 1
+            self.counters.consecutive_failures += 1
             self.decode_counts['decode_' + err.kind] += 1
             self.last_error = f'image rejected: {err}'
+            self.last_result = None
             return None
         if result.warnings:
             self.input_warning = result.warnings[-1]

@@ -283,3 +283,64 @@ def test_runtime_parameter_changes_are_refused_and_old_values_kept(ros_context):
         assert node.pipeline.checks.max_stamp_jump_s == 30.0
     finally:
         node.destroy_node()
+
+
+def _noise_image(stamp_ns, encoding='mono8', seed=0):
+    msg = Image()
+    _set_stamp(msg, stamp_ns)
+    msg.height, msg.width, msg.step, msg.encoding = 48, 64, 64, encoding
+    msg.data = np.random.default_rng(seed).integers(0, 256, 48 * 64, np.uint8).tobytes()
+    return msg
+
+
+def test_stamp_problems_and_undecodable_streams_reach_diagnostics(ros_context):
+    node = PlaneNode(context=ros_context,
+                     parameter_overrides=[Parameter('diagnostics.period_s', value=60.0)])
+    with node._cv:
+        node._stop = True
+        node._cv.notify_all()
+    node._worker.join(timeout=5.0)
+    diagnostics = _Recorder(node._pub_diag)
+
+    def status():
+        node._publish_diagnostics()
+        msg = diagnostics.messages[-1].status[0]
+        return msg.level[0], msg.message, {kv.key: kv.value for kv in msg.values}
+
+    def process_pending():
+        pair, node._pending = node._pending, None
+        if pair is not None:
+            node._process(pair)
+        return pair
+
+    try:
+        # The right camera's stamps are 50 ms late at 10 Hz: nothing pairs (slop 10 ms).
+        t0 = 1_700_000_000 * 10**9
+        for k in range(20):
+            node._on_image('left', _noise_image(t0 + k * 10**8))
+            node._on_image('right', _noise_image(t0 + k * 10**8 + 50_000_000))
+        assert process_pending() is None
+        level, message, values = status()
+        assert level == 1 and message.startswith('no stereo pairs received; ')
+        assert 'differs by 50.0 ms > sync.slop_s 10 ms' in message
+        assert int(values['frames unpaired: stamp skew > slop']) >= 20
+        # A driver that does not stamp: the first pair goes through, the rest are duplicates.
+        for k in range(3):
+            node._on_image('left', _noise_image(0, seed=k))
+            node._on_image('right', _noise_image(0, seed=k + 10))
+            process_pending()
+        level, message, values = status()
+        assert level >= 1 and 'header stamp is zero' in message
+        assert values['stamps zero'] == '6'
+        # Only undecodable images: WARN, then ERROR after three pairs, naming the problem.
+        t1 = t0 + 10 * 10**9
+        for k in range(4):
+            node._on_image('left', _noise_image(t1 + k * 10**8, encoding='nv12'))
+            node._on_image('right', _noise_image(t1 + k * 10**8, encoding='nv12'))
+            assert process_pending() is not None
+        level, message, values = status()
+        assert level == 2 and "unsupported encoding 'nv12'" in message, message
+        assert values['decode errors (encoding)'] == '4'
+        assert node._counters['internal_errors'] == 0
+    finally:
+        node.destroy_node()
