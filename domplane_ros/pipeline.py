@@ -161,9 +161,7 @@ class PlanePipeline:
         self.stats.frames += 1
         cfg = self.config
         if check.refused:
-            empty = np.zeros((0, 2), np.float64)
-            return self._failed(left, stamp_ns, FailedEstimate(check.refused), empty, empty,
-                                False, check.warnings, t0)
+            return self._refused(left, stamp_ns, check.refused, check.warnings, t0)
         left_pts = detect_corners(left, cfg.features)
         right_pts = detect_corners(right, cfg.features)
         t1 = time.perf_counter()
@@ -195,41 +193,43 @@ class PlanePipeline:
             self.checks.counts['too_few_features'] += 1
             reason += (f' (left {texture_note(left)}; right {texture_note(right)})')
         t2 = time.perf_counter()
-        if not (estimate.ok and not reason):
-            return self._failed(left, stamp_ns, estimate, left_pts, right_pts, reinit,
-                                check.warnings, t0, reason, t1, t2)
-        h = estimate.homography
-        mask = plane_mask(left, right, h, cfg.mask)
-        self._last_h = h
-        self._last_energy_per_point = estimate.final_energy / max(left_pts.shape[0], 1)
-        self.stats.succeeded += 1
+        if estimate.ok and not reason:
+            h = estimate.homography
+            mask = plane_mask(left, right, h, cfg.mask)
+            self._last_h = h
+            self._last_energy_per_point = estimate.final_energy / max(left_pts.shape[0], 1)
+            self.stats.succeeded += 1
+            ok = True
+        else:
+            mask = np.zeros(left.shape, np.uint8)
+            self._last_h = None
+            self._last_energy_per_point = None
+            self.stats.failed += 1
+            h = None
+            ok = False
         t3 = time.perf_counter()
         timings = {'features': 1e3 * (t1 - t0), 'estimate': 1e3 * (t2 - t1),
                    'mask': 1e3 * (t3 - t2), 'total': 1e3 * (t3 - t0)}
-        return FrameResult(stamp_ns=stamp_ns, ok=True, homography=h, mask=mask,
+        return FrameResult(stamp_ns=stamp_ns, ok=ok, homography=h, mask=mask,
                            estimate=estimate, left_points=left_pts, right_points=right_pts,
-                           reinitialised=reinit, reason='', state=self.state,
-                           timings_ms=timings, warnings=check.warnings)
+                           reinitialised=reinit, reason='' if ok else reason,
+                           state=self.state, timings_ms=timings, warnings=check.warnings)
 
-    def _failed(self, left: np.ndarray, stamp_ns: int, estimate: PlaneEstimate | FailedEstimate,
-                left_pts: np.ndarray, right_pts: np.ndarray, reinit: bool,
-                warnings: tuple[str, ...], t0: float, reason: str | None = None,
-                t1: float | None = None, t2: float | None = None) -> FrameResult:
-        """Return a failed frame: no homography, a mask of zeros; the warm start is dropped."""
+    def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
+                 warnings: tuple[str, ...], t0: float) -> FrameResult:
+        """Return the failed frame of a refused pair; the warm start is dropped."""
         self._last_h = None
         self._last_energy_per_point = None
         self.stats.failed += 1
-        mask = np.zeros(left.shape, np.uint8)
-        t3 = time.perf_counter()
-        t1 = t3 if t1 is None else t1
-        t2 = t3 if t2 is None else t2
-        timings = {'features': 1e3 * (t1 - t0), 'estimate': 1e3 * (t2 - t1),
-                   'mask': 1e3 * (t3 - t2), 'total': 1e3 * (t3 - t0)}
-        return FrameResult(stamp_ns=stamp_ns, ok=False, homography=None, mask=mask,
-                           estimate=estimate, left_points=left_pts, right_points=right_pts,
-                           reinitialised=reinit,
-                           reason=estimate.reason if reason is None else reason,
-                           state=self.state, timings_ms=timings, warnings=warnings)
+        empty = np.zeros((0, 2), np.float64)
+        total_ms = 1e3 * (time.perf_counter() - t0)
+        return FrameResult(stamp_ns=stamp_ns, ok=False, homography=None,
+                           mask=np.zeros(left.shape, np.uint8), estimate=FailedEstimate(reason),
+                           left_points=empty, right_points=empty, reinitialised=False,
+                           reason=reason, state=self.state,
+                           timings_ms={'features': 0.0, 'estimate': 0.0, 'mask': 0.0,
+                                       'total': total_ms},
+                           warnings=warnings)
 
     def _input_problem(self, estimate: PlaneEstimate, left_pts: np.ndarray,
                        size: tuple[int, int]) -> str:
