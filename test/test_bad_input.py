@@ -23,6 +23,7 @@ import domplane_ros.pipeline as pipeline_module
 from domplane_ros.pipeline import PlanePipeline
 from domplane_ros.scene import random_scene
 from domplane_ros.sync import ApproximateTimeSync
+from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
 
@@ -353,3 +354,44 @@ def test_new_parameters_are_validated():
         PipelineConfig(min_inlier_spread=1.5)
     with pytest.raises(ValueError, match='pipeline.max_stamp_jump_s'):
         PipelineConfig(max_stamp_jump_s=0.0)
+
+
+# --- Pipeline: random pairs ------------------------------------------------------------------
+
+_CONTENT = ('noise', 'blocks', 'zeros', 'saturated', 'flat', 'line')
+
+
+def _random_image(shape, content, rng):
+    height, width = shape
+    if content == 'noise':
+        return rng.integers(0, 256, shape, dtype=np.uint8)
+    if content == 'blocks':
+        small = rng.integers(0, 256, (max(1, height // 8), max(1, width // 8)), dtype=np.uint8)
+        return cv2.resize(small, (width, height), interpolation=cv2.INTER_NEAREST)
+    if content == 'line':   # texture on one row only: collinear corners
+        image = np.full(shape, 128, np.uint8)
+        image[height // 2] = rng.integers(0, 256, width, dtype=np.uint8)
+        return image
+    return np.full(shape, {'zeros': 0, 'saturated': 255, 'flat': 77}[content], np.uint8)
+
+
+@settings(max_examples=60, deadline=None)
+@given(frames=st.lists(st.tuples(
+    st.integers(1, 90), st.integers(1, 120), st.booleans(), st.sampled_from(_CONTENT),
+    st.sampled_from(_CONTENT), st.integers(-2**62, 2**62), st.integers(0, 2**32 - 1)),
+    min_size=1, max_size=4))
+def test_random_pairs_give_a_valid_result_or_a_failure_with_reason(frames):
+    pipeline = PlanePipeline()
+    for height, width, same_size, left_kind, right_kind, stamp, seed in frames:
+        rng = np.random.default_rng(seed)
+        left = _random_image((height, width), left_kind, rng)
+        right = _random_image((height, width) if same_size else (height + 1, width),
+                              right_kind, rng)
+        result = pipeline.process(left, right, stamp)
+        assert result.mask.shape == left.shape and result.mask.dtype == np.uint8
+        assert set(np.unique(result.mask)) <= {0, 127, 255}
+        if result.ok:
+            assert np.all(np.isfinite(result.homography)) and result.homography[2, 2] == 1.0
+            assert result.reason == ''
+        else:
+            assert result.homography is None and result.reason and not result.mask.any()
