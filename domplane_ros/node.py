@@ -120,6 +120,10 @@ class PlaneNode(Node):
                 param = self.declare_parameter(spec.name, default, descriptor(spec))
             except (InvalidParameterTypeException, InvalidParameterValueException,
                     ParameterException) as err:
+                # Our validator's message is shorter and says which bound was crossed.
+                override = (getattr(self, '_parameter_overrides', None) or {}).get(spec.name)
+                if override is not None:
+                    check_value(spec, _plain(override.value))
                 raise ConfigError(f'parameter {spec.name!r}: {err}') from err
             value = param.value
             if value is None:

@@ -214,11 +214,15 @@ def test_node_fed_bad_pairs_then_good_pairs_recovers(ros_context, scene):  # noq
 
 _BAD_PARAMS = [
     ('unknown key', 'no_such.key: 1', "unknown parameter 'no_such.key'"),
-    ('wrong type', "estimator.threshold_px: 'three'", "'estimator.threshold_px'"),
-    ('out of range', 'estimator.lambda_weight: 1.5', "'estimator.lambda_weight'"),
+    ('wrong type', "estimator.threshold_px: 'three'",
+     "'estimator.threshold_px': expected a finite number, got 'three'"),
+    ('out of range', 'estimator.lambda_weight: 1.5',
+     "'estimator.lambda_weight': 1.5 is above the maximum 0.99"),
     ('inverted range', 'prior.tilt_deg: [40.0, 10.0]', "'prior.tilt_deg': inverted range"),
     ('new parameter out of range', 'pipeline.min_inlier_spread: 2.0',
-     "'pipeline.min_inlier_spread'"),
+     "'pipeline.min_inlier_spread': 2.0 is above the maximum 1.0"),
+    ('integer below minimum', 'features.max_points: 2',
+     "'features.max_points': 2 is below the minimum 8"),
 ]
 
 
