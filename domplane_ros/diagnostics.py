@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
+from domplane_ros.health import input_diagnostic_values
 import numpy as np
 
 # diagnostic_msgs/DiagnosticStatus levels.
@@ -16,7 +17,8 @@ FAILURES_FOR_ERROR = 3
 def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, processed: int,
                  dropped_busy: int, dropped_sync: int, decode_errors: int, lock_state: str,
                  reinitialisations: int, consecutive_failures: int, last_result: Any,
-                 last_error: str, joint_speed: float | None = None
+                 last_error: str, input_counts: Sequence[Mapping[str, int]] = (),
+                 input_warning: str = '', joint_speed: float | None = None
                  ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
@@ -32,27 +34,38 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
             ``'searching'``.
         reinitialisations: Prior searches started.
         consecutive_failures: Processed pairs in a row without a plane.
-        last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
+        last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None (also
+            when the last pair could not be decoded).
         last_error: The last error message ('' if none).
+        input_counts: Counts of input problems (see :mod:`domplane_ros.health`), summed and
+            shown one key per kind.
+        input_warning: An input problem seen since the last status that did not fail a pair
+            (a zero stamp, a stamp jump, stamp skew beyond the slop); it makes an OK status a
+            WARN and is appended to the message.
         joint_speed: The head's largest joint speed in rad/s, or None without joint input.
 
     Returns:
-        ``(level, message, values)``: level 0 OK, 1 WARN (no input, or the last pair had no
-        plane) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a row without a plane); a one-line
-        message; key/value pairs as strings.
+        ``(level, message, values)``: level 0 OK, 1 WARN (no input, the last pair had no
+        plane, or an input warning) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a row without
+        a plane); a one-line message; key/value pairs as strings.
 
     """
     lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
     result = last_result
+    # The last pair's failure: the pipeline's reason, or (no result: it was not decoded) the
+    # last error.
+    reason = result.reason if result is not None and not result.ok else last_error
     if rate == 0.0:
         level, message = WARN, 'no stereo pairs received'
     elif consecutive_failures >= FAILURES_FOR_ERROR:
-        level, message = ERROR, f'no plane for {consecutive_failures} pairs: ' + (
-            result.reason if result is not None else '')
-    elif result is not None and not result.ok:
-        level, message = WARN, f'no plane: {result.reason}'
+        level, message = ERROR, f'no plane for {consecutive_failures} pairs: {reason}'
+    elif consecutive_failures > 0 or (result is not None and not result.ok):
+        level, message = WARN, f'no plane: {reason}'
     else:
         level, message = OK, 'plane ' + lock_state
+    if input_warning:
+        level = max(level, WARN)
+        message += f'; {input_warning}'
     ok = result is not None and result.ok
     values = [
         ('input rate [pairs/s]', f'{rate:.2f}'),
@@ -73,4 +86,5 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('re-initialisations', reinitialisations),
         ('last error', last_error or 'none'),
     ]
+    values += input_diagnostic_values(*input_counts)
     return level, message, [(key, str(value)) for key, value in values]

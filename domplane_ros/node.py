@@ -21,9 +21,10 @@ from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETER
                                  PlaneNodeConfig)
 from domplane_ros.diagnostics import plane_status, STATUS_NAME
 from domplane_ros.errors import ImageDecodeError
+from domplane_ros.health import (homography_problem, new_counts, problem_key, StampChecks,
+                                 Throttle)
 from domplane_ros.image import message_to_gray
-from domplane_ros.mask import overlay
-from domplane_ros.pipeline import FrameResult, PlanePipeline
+from domplane_ros.pipeline import debug_overlay, FrameResult, PlanePipeline
 from domplane_ros.ros_io import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros_io import READ_ONLY
 from domplane_ros.sync import ApproximateTimeSync, Pair
@@ -70,7 +71,13 @@ class PlaneNode(Node):
         self.pipeline = PlanePipeline(self.config)
         self._sync = ApproximateTimeSync(self.config.sync.slop_s, self.config.sync.queue_size)
         self._counters = {'pairs': 0, 'processed': 0, 'dropped_busy': 0, 'decode_errors': 0,
-                          'consecutive_failures': 0}
+                          'consecutive_failures': 0, 'internal_errors': 0}
+        # Input problems (see domplane_ros.health): per-message stamp checks, decode errors by
+        # kind, one throttle clock per kind of problem, the last warning for diagnostics.
+        self._stamp_checks = StampChecks(self._sync.slop_ns)
+        self._decode_counts = new_counts()
+        self._throttle = Throttle(_THROTTLE_S)
+        self._input_warning = ''
         self._latency_ms: deque[float] = deque(maxlen=200)
         self._last_result: FrameResult | None = None
         self._last_error = ''
@@ -123,6 +130,10 @@ class PlaneNode(Node):
                 param = self.declare_parameter(spec.name, default, descriptor(spec))
             except (InvalidParameterTypeException, InvalidParameterValueException,
                     ParameterException) as err:
+                # Our validator's message is shorter and says which bound was crossed.
+                override = (getattr(self, '_parameter_overrides', None) or {}).get(spec.name)
+                if override is not None:
+                    check_value(spec, _plain(override.value))
                 raise ConfigError(f'parameter {spec.name!r}: {err}') from err
             value = param.value
             if value is None:
@@ -161,6 +172,7 @@ class PlaneNode(Node):
         with self._lock:
             if config.sync != self.config.sync:
                 self._sync = ApproximateTimeSync(config.sync.slop_s, config.sync.queue_size)
+                self._stamp_checks.slop_ns = self._sync.slop_ns
             self.pipeline.update_config(config)
             self.config = config
             self._values = trial
@@ -178,9 +190,19 @@ class PlaneNode(Node):
             f'({wanted}; policy id {getattr(info, "last_policy_kind", "?")}); no images will '
             'arrive from it. Set qos.reliable to match the camera driver.')
 
+    def _warn_input(self, message: str, key: str | None = None) -> None:
+        """Log an input problem, throttled per kind of problem (``key``, or the message's)."""
+        if self._throttle.due(key or problem_key(message), time.monotonic()):
+            self.get_logger().warning(message)
+
     def _on_image(self, side: str, msg: Image) -> None:
+        stamp_ns = _stamp_ns(msg)
         with self._lock:
-            pairs = self._sync.add(side, _stamp_ns(msg), msg)
+            warnings = self._stamp_checks.observe(side, stamp_ns)
+            pairs = self._sync.add(side, stamp_ns, msg)
+        for warning in warnings:
+            self._input_warning = warning
+            self._warn_input(warning)
         for pair in pairs:
             with self._cv:
                 if self._pending is not None:
@@ -216,6 +238,7 @@ class PlaneNode(Node):
             try:
                 self._process(pair)
             except Exception as err:  # noqa: B902 - the worker must survive any one frame
+                self._counters['internal_errors'] += 1
                 self._last_error = f'{type(err).__name__}: {err}'
                 self.get_logger().error(f'frame failed: {self._last_error}',
                                         throttle_duration_sec=_THROTTLE_S)
@@ -227,27 +250,31 @@ class PlaneNode(Node):
             right = message_to_gray(pair.right)
         except ImageDecodeError as err:
             self._counters['decode_errors'] += 1
+            self._counters['consecutive_failures'] += 1
+            self._decode_counts['decode_' + err.kind] += 1
             self._last_error = f'image rejected: {err}'
-            self.get_logger().error(self._last_error, throttle_duration_sec=_THROTTLE_S)
+            self._last_result = None
+            if self._throttle.due('decode ' + err.kind, time.monotonic()):
+                self.get_logger().error(self._last_error)
             return
         with self._lock:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,
                                            reset=pair.after_reset,
                                            joint_speed=self.joint_speed())
+        for warning in result.warnings:
+            self._input_warning = warning
+            self._warn_input(warning)
         header = pair.left.header
-        if result.ok:
+        if result.ok and not homography_problem(result.homography):
             self._pub_h.publish(homography_msg(result.homography))
             self._counters['consecutive_failures'] = 0
         else:
             self._counters['consecutive_failures'] += 1
-            self.get_logger().warning(f'no plane: {result.reason}',
-                                      throttle_duration_sec=_THROTTLE_S)
+            self._warn_input(f'no plane: {result.reason}',
+                             key='no plane ' + problem_key(result.reason))
         self._pub_mask.publish(image_msg(result.mask, header, 'mono8'))
         if self._pub_debug.get_subscription_count() > 0:
-            inl = result.estimate.inliers if result.ok else None
-            pts = result.left_points
-            rgb = overlay(left, result.mask, pts[inl] if inl is not None else None,
-                          pts[~inl] if inl is not None else pts)
+            rgb = debug_overlay(left, result)
             self._pub_debug.publish(image_msg(rgb, header, 'rgb8'))
         self._latency_ms.append(1e3 * (time.perf_counter() - t0))
         self._counters['processed'] += 1
@@ -269,7 +296,10 @@ class PlaneNode(Node):
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=self._counters['consecutive_failures'],
             last_result=self._last_result, last_error=self._last_error,
-            joint_speed=self.joint_speed())
+            input_counts=(self.pipeline.checks.counts, self._stamp_checks.counts,
+                          self._decode_counts),
+            input_warning=self._input_warning, joint_speed=self.joint_speed())
+        self._input_warning = ''
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
             level, message, values))

@@ -12,15 +12,17 @@ import math
 import time
 
 from domplane_ros.config import PlaneNodeConfig, PriorConfig
-from domplane_ros.estimator import estimate_plane, FailedEstimate, PlaneEstimate
-from domplane_ros.features import detect_corners
+from domplane_ros.estimator import (estimate_plane, FailedEstimate, PlaneEstimate,
+                                    prior_screening)
+from domplane_ros.features import detect_corners, roi_to_pixels
+from domplane_ros.health import homography_problem, inlier_spread, PairChecks, texture_note
 from domplane_ros.homography import apply_homography
 from domplane_ros.image import check_gray
-from domplane_ros.mask import plane_mask
-from domplane_ros.prior import prior_candidates, screen_candidates
+from domplane_ros.lines import detect_lines, endpoints
+from domplane_ros.mask import overlay, plane_mask
+from domplane_ros.prior import prior_candidates
 from domplane_ros.tracking import camera_motion, predict_plane_homography
 import numpy as np
-from scipy.spatial import cKDTree
 
 # Lock states reported in diagnostics.
 LOCKED = 'locked'        # the last frame gave a plane; the next one warm-starts from it
@@ -54,6 +56,11 @@ class FrameResult:
         state: Lock state after this frame: ``'locked'``, ``'tracking'`` or ``'searching'``.
         timings_ms: Milliseconds spent in ``features``, ``tracking``, ``estimate``, ``mask``
             and ``total``.
+        warnings: Input problems that did not refuse the pair (a stamp jump, a size change),
+            each a one-line message (see :mod:`domplane_ros.health`).
+        left_lines: (K, 4) float64 left line segments ``(x1, y1, x2, y2)`` (empty unless
+            ``features.kind`` is ``lines`` or ``both``).
+        right_lines: (L, 4) float64 right line segments.
         warm_start: Where this frame's estimate started: ``'prediction'`` (the last
             homography moved through the tracked camera motion), ``'last'`` (the last
             homography as is), ``'search'`` (prior candidates), ``'initial'`` (the
@@ -78,6 +85,9 @@ class FrameResult:
     reason: str
     state: str
     timings_ms: dict[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    right_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     warm_start: str = ''
     prediction: np.ndarray | None = None
     candidates: int = 0
@@ -142,8 +152,8 @@ class PlanePipeline:
         self.stats = PipelineStats()
         self._last_h: np.ndarray | None = None
         self._last_energy_per_point: float | None = None
-        self._last_stamp_ns: int | None = None
-        self._last_shape: tuple[tuple[int, int], tuple[int, int]] | None = None
+        self.checks = PairChecks(self.config.pipeline.max_clipped_fraction,
+                                 self.config.pipeline.max_stamp_jump_s)
         self._bounds_cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
         self._state = SEARCHING
@@ -172,6 +182,8 @@ class PlanePipeline:
             self._bounds_cache.clear()
             self._candidates_cache.clear()
         self.config = config
+        self.checks.max_clipped_fraction = config.pipeline.max_clipped_fraction
+        self.checks.max_stamp_jump_s = config.pipeline.max_stamp_jump_s
 
     def reset(self) -> None:
         """Drop the warm start: the next frames search the prior."""
@@ -191,13 +203,19 @@ class PlanePipeline:
         Args:
             left: (H, W) uint8 left grey image.
             right: (H', W') uint8 right grey image.
-            stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one drops
-                the warm start (clock reset, bag loop).
+            stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one (clock
+                reset, bag loop) or more than ``pipeline.max_stamp_jump_s`` newer drops the
+                warm start.
             reset: Drop the warm start before this frame.
             joint_speed: Largest head joint speed in rad/s, if known (None: no joint input).
 
         Returns:
-            The :class:`FrameResult`; it is never a non-finite homography.
+            The :class:`FrameResult`; it is never a non-finite homography. Pairs that
+            :class:`~domplane_ros.health.PairChecks` refuses (sizes differ, a frozen camera,
+            a black or saturated frame), too few features, inliers with too little spread
+            (``pipeline.min_inlier_spread``) and homographies outside the prior are failures
+            with the reason, a mask of zeros and no homography; like any failure they move
+            the lock state to ``'tracking'`` (then ``'searching'``).
 
         Raises:
             ValueError: If an image is not a 2-D uint8 array, or ``joint_speed`` is not
@@ -209,52 +227,84 @@ class PlanePipeline:
         check_gray(right, 'right')
         if joint_speed is not None and not math.isfinite(joint_speed):
             raise ValueError(f'joint_speed must be finite, got {joint_speed!r}')
-        shapes = (left.shape, right.shape)
-        if (reset or (self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns)
-                or (self._last_shape is not None and shapes != self._last_shape)):
+        check = self.checks.check(left, right, stamp_ns)
+        if reset or check.reset:
             self.reset()
-        self._last_stamp_ns = stamp_ns
-        self._last_shape = shapes
         self.stats.frames += 1
         cfg = self.config
         fast = joint_speed is not None and abs(joint_speed) > cfg.pipeline.fast_joint_velocity
-        left_pts = detect_corners(left, cfg.features)
-        right_pts = detect_corners(right, cfg.features)
+        if check.refused:
+            return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
+        feats = _detect(left, right, cfg)
+        left_pts, right_pts = feats[0], feats[1]
         t1 = time.perf_counter()
         height, width = left.shape
         size = (width, height)
+        track_pts = self._tracking_points(left, right, feats)
         motions = self._camera_motions(left, right)
         t2 = time.perf_counter()
         step = _Step()
         if self._state != SEARCHING:
-            self._track_or_lock(step, left_pts, right_pts, size, motions, fast)
+            self._track_or_lock(step, feats, size, motions, fast)
         if self._state == SEARCHING:
-            self._search_step(step, left_pts, right_pts, size, motions)
+            self._search_step(step, feats, size, motions)
         t3 = time.perf_counter()
         estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
         if step.accepted:
             h = estimate.homography
             mask = plane_mask(left, right, h, cfg.mask)
             self._last_h = h
-            self._last_energy_per_point = estimate.final_energy / max(left_pts.shape[0], 1)
+            self._last_energy_per_point = estimate.final_energy / max(_n_left(feats), 1)
             self.stats.succeeded += 1
         else:
             h = None
             mask = np.zeros(left.shape, np.uint8)
             self.stats.failed += 1
+        reason = '' if step.accepted else (step.reason or estimate.reason)
+        if not step.accepted and reason.startswith(('too few left', 'too few right')):
+            self.checks.counts['too_few_features'] += 1
+            reason += f' (left {texture_note(left)}; right {texture_note(right)})'
         if not step.keep_previous:
-            self._previous = _Previous(left.copy(), right.copy(), left_pts, right_pts)
+            self._previous = _Previous(left.copy(), right.copy(), *track_pts)
         t4 = time.perf_counter()
         timings = {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
                    'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3),
                    'total': 1e3 * (t4 - t0)}
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
                            estimate=estimate, left_points=left_pts, right_points=right_pts,
-                           reinitialised=step.reinitialised,
-                           reason='' if step.accepted else (step.reason or estimate.reason),
-                           state=self._state, timings_ms=timings,
+                           reinitialised=step.reinitialised, reason=reason,
+                           state=self._state, timings_ms=timings, warnings=check.warnings,
+                           left_lines=feats[2], right_lines=feats[3],
                            warm_start=step.warm_start, prediction=step.prediction,
                            candidates=step.candidates, fast_motion=fast)
+
+    def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
+                 warnings: tuple[str, ...], t0: float, fast: bool) -> FrameResult:
+        """Return the failed frame of a refused pair: a failure like any other.
+
+        The plane is carried as in the ``'tracking'`` state (or the search goes on); the
+        refused images are not kept for tracking.
+        """
+        self.stats.failed += 1
+        if self._state != SEARCHING:
+            self._lose_frame(_Step(keep_previous=True), None)
+        empty = np.zeros((0, 2), np.float64)
+        total_ms = 1e3 * (time.perf_counter() - t0)
+        return FrameResult(stamp_ns=stamp_ns, ok=False, homography=None,
+                           mask=np.zeros(left.shape, np.uint8), estimate=FailedEstimate(reason),
+                           left_points=empty, right_points=empty, reinitialised=False,
+                           reason=reason, state=self._state,
+                           timings_ms={'features': 0.0, 'tracking': 0.0, 'estimate': 0.0,
+                                       'mask': 0.0, 'total': total_ms},
+                           warnings=warnings, fast_motion=fast)
+
+    def _tracking_points(self, left: np.ndarray, right: np.ndarray,
+                         feats: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Return the corners to track from this frame (detected if only lines are used)."""
+        if not self.config.tracking.enabled or self.config.features.kind != 'lines':
+            return feats[0], feats[1]
+        return (detect_corners(left, self.config.features),
+                detect_corners(right, self.config.features))
 
     # --- Temporal prediction ---------------------------------------------------------------
     def _camera_motions(self, left: np.ndarray, right: np.ndarray
@@ -281,13 +331,12 @@ class PlanePipeline:
         return predict_plane_homography(h, motions[0], motions[1])
 
     # --- Locked and tracking ---------------------------------------------------------------
-    def _track_or_lock(self, step: _Step, left_pts: np.ndarray, right_pts: np.ndarray,
+    def _track_or_lock(self, step: _Step, feats: tuple[np.ndarray, ...],
                        size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
                        fast: bool) -> None:
         assert self._last_h is not None
-        cfg = self.config
         prediction = self._propagate(self._last_h, motions)
-        if prediction is not None and self._suspicious_bounds(prediction, size):
+        if prediction is not None and self._suspicious_bounds(prediction, size, count=False):
             prediction = None
         step.prediction = prediction
         if prediction is not None:
@@ -296,25 +345,30 @@ class PlanePipeline:
         # is stale, and a stale start can slide into a look-alike.
         starts = [('prediction', prediction) if prediction is not None
                   else ('last', self._last_h)]
-        reason = self._too_few(left_pts, right_pts)
+        reason = self._too_few(feats)
         for name, init in starts if not reason else ():
             wide = fast and prediction is None
-            estimate = self._warm_estimate(left_pts, right_pts, init, wide)
+            estimate = self._warm_estimate(feats, init, wide)
             step.estimate, step.warm_start = estimate, name
             if not estimate.ok:
                 reason = estimate.reason
                 continue
             # A fast head (joint input) may change the energy legitimately: no energy check.
-            reason = self._suspicious(estimate, left_pts.shape[0], size, energy=not fast)
+            reason = self._suspicious(estimate, _n_left(feats), size, energy=not fast)
+            if not reason:
+                reason = self._input_problem(estimate, feats[0], size)
             if not reason:
                 step.accepted = True
                 self._state = LOCKED
                 self._tracking_frames = 0
                 return
         step.reason = reason
-        # Failed or suspicious: carry the plane forward (tracking) or give up (searching).
+        self._lose_frame(step, prediction)
+
+    def _lose_frame(self, step: _Step, prediction: np.ndarray | None) -> None:
+        """Failed or suspicious: carry the plane forward (tracking) or give up (searching)."""
         self._tracking_frames += 1
-        if self._tracking_frames <= cfg.pipeline.max_tracking_frames:
+        if self._tracking_frames <= self.config.pipeline.max_tracking_frames:
             self._state = TRACKING
             if prediction is not None:
                 self._last_h = prediction
@@ -324,19 +378,25 @@ class PlanePipeline:
             return
         self._start_search()
 
-    def _warm_estimate(self, left_pts: np.ndarray, right_pts: np.ndarray, init: np.ndarray,
+    def _warm_estimate(self, feats: tuple[np.ndarray, ...], init: np.ndarray,
                        wide: bool) -> PlaneEstimate | FailedEstimate:
         cfg = self.config
+        lines = self._lines(feats)
         warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
                                                        cfg.pipeline.warm_gnc_start_px))
         if wide:
             # Fast head and no prediction: a first pass with a wide basin.
             wide_options = replace(cfg.estimator, threshold_px=min(
                 200.0, _WIDE_BASIN_FACTOR * cfg.estimator.threshold_px))
-            first = estimate_plane(left_pts, right_pts, init, wide_options)
+            first = estimate_plane(feats[0], feats[1], init, wide_options, **lines)
             if first.ok:
                 init = first.homography
-        return estimate_plane(left_pts, right_pts, init, warm)
+        return estimate_plane(feats[0], feats[1], init, warm, **lines)
+
+    def _lines(self, feats: tuple[np.ndarray, ...]) -> dict[str, np.ndarray]:
+        if self.config.features.kind == 'points':
+            return {}
+        return {'left_lines': feats[2], 'right_lines': feats[3]}
 
     # --- Searching -------------------------------------------------------------------------
     def _start_search(self) -> None:
@@ -346,7 +406,7 @@ class PlanePipeline:
         self._last_energy_per_point = None
         self._search = None
 
-    def _search_step(self, step: _Step, left_pts: np.ndarray, right_pts: np.ndarray,
+    def _search_step(self, step: _Step, feats: tuple[np.ndarray, ...],
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
                      ) -> None:
         """Refine the next few prior candidates; accept the best once enough were tried."""
@@ -356,7 +416,9 @@ class PlanePipeline:
             self._search = _Search()
             self.stats.reinitialisations += 1
         search = self._search
-        reason = self._too_few(left_pts, right_pts)
+        left_pts, right_pts = feats[0], feats[1]
+        lines = self._lines(feats)
+        reason = self._too_few(feats)
         if reason:
             step.reason = reason
             return
@@ -365,31 +427,37 @@ class PlanePipeline:
         if search.best is not None:
             # The best so far, moved to this frame and refined on its points.
             start = self._propagate(search.best, motions)
-            best = self._warm_estimate(left_pts, right_pts,
-                                       start if start is not None else search.best, False)
-            if best.ok and self._suspicious(best, left_pts.shape[0], size, energy=False):
+            best = self._warm_estimate(feats, start if start is not None else search.best,
+                                       False)
+            if best.ok and self._rejected(best, feats, size):
                 best = None
+        rejection = ''
         if cfg.initial_homography and not search.initial_tried:
             search.initial_tried = True
             budget -= 1
             step.candidates += 1
             first = estimate_plane(left_pts, right_pts, np.array(cfg.initial_homography),
-                                   cfg.estimator)
-            if first.ok and not self._suspicious(first, left_pts.shape[0], size,
-                                                 energy=False):
+                                   cfg.estimator, **lines)
+            if first.ok and not self._rejected(first, feats, size):
                 step.warm_start = 'initial'
                 self._accept_search(step, first)
                 return
         candidates = self._candidates(size)
         limit = min(cfg.prior.refine_best, candidates.shape[0])
-        tree = cKDTree(right_pts)
-        costs = screen_candidates(candidates, left_pts, tree, cfg.prior.screen_threshold_px)
+        costs = prior_screening(left_pts, right_pts, candidates, cfg.prior.screen_threshold_px,
+                                line_weight=cfg.estimator.line_weight, **lines)
+        if isinstance(costs, str):
+            step.reason = costs
+            return
         order = [int(i) for i in np.argsort(costs, kind='stable') if int(i) not in search.tried]
         for index in order[:max(0, min(budget, limit - len(search.tried)))]:
             search.tried.add(index)
             step.candidates += 1
-            result = estimate_plane(left_pts, right_pts, candidates[index], cfg.estimator)
-            if result.ok and self._suspicious(result, left_pts.shape[0], size, energy=False):
+            result = estimate_plane(left_pts, right_pts, candidates[index], cfg.estimator,
+                                    **lines)
+            problem = self._rejected(result, feats, size) if result.ok else ''
+            if problem:
+                rejection = problem
                 continue
             if best is None or _better(result, best):
                 best = result
@@ -404,8 +472,12 @@ class PlanePipeline:
         if best is not None and best.ok:
             self._accept_search(step, best)
             return
-        step.reason = ('prior search found no plane' if best is None else
-                       f'prior search found no plane: {best.reason}')
+        if best is None and rejection:
+            self._count_rejection(rejection)
+            step.reason = f'prior search found no plane: {rejection}'
+        else:
+            step.reason = ('prior search found no plane' if best is None else
+                           f'prior search found no plane: {best.reason}')
         self._search = None  # start again with the next frame's points
 
     def _accept_search(self, step: _Step, estimate: PlaneEstimate) -> None:
@@ -421,12 +493,54 @@ class PlanePipeline:
         return self._candidates_cache[size]
 
     # --- Checks ----------------------------------------------------------------------------
-    def _too_few(self, left_pts: np.ndarray, right_pts: np.ndarray) -> str:
+    def _too_few(self, feats: tuple[np.ndarray, ...]) -> str:
         min_inliers = self.config.estimator.min_inliers
-        if left_pts.shape[0] < min_inliers:
-            return f'too few left features: {left_pts.shape[0]} < min_inliers {min_inliers}'
-        if right_pts.shape[0] < 4:
-            return f'too few right features: {right_pts.shape[0]}'
+        n_left = _n_left(feats)
+        n_right = feats[1].shape[0] + feats[3].shape[0]
+        reason = ''
+        if n_left < min_inliers:
+            reason = f'too few left features: {n_left} < min_inliers {min_inliers}'
+        elif n_right < 4:
+            reason = f'too few right features: {n_right}'
+        return reason
+
+    def _rejected(self, estimate: PlaneEstimate, feats: tuple[np.ndarray, ...],
+                  size: tuple[int, int]) -> str:
+        """Return why a search result must not be accepted ('' if it may be; not counted)."""
+        return (self._suspicious_bounds(estimate.homography, size, count=False)
+                or self._input_problem(estimate, feats[0], size, count=False))
+
+    def _count_rejection(self, reason: str) -> None:
+        """Count a search's final rejection reason once, under its kind."""
+        for needle, key in (('outside the prior', 'outside_prior'),
+                            ('degenerate geometry', 'degenerate_geometry')):
+            if needle in reason:
+                self.checks.counts[key] += 1
+                return
+        self.checks.counts['invalid_homography'] += 1
+
+    def _input_problem(self, estimate: PlaneEstimate, left_pts: np.ndarray,
+                       size: tuple[int, int], count: bool = True) -> str:
+        """Return why a converged estimate must not be published ('' if it may be)."""
+        problem = homography_problem(estimate.homography)
+        if problem:
+            if count:
+                self.checks.counts['invalid_homography'] += 1
+            return problem
+        min_spread = self.config.pipeline.min_inlier_spread
+        if min_spread > 0:
+            x0, y0, x1, y1 = roi_to_pixels(self.config.features.roi, *size)
+            # Inlier corners and the endpoints of inlier segments.
+            inliers = np.concatenate([
+                left_pts[estimate.inliers],
+                endpoints(estimate.left_lines[estimate.line_inliers])])
+            spread = inlier_spread(inliers, float((x1 - x0) * (y1 - y0)))
+            if spread < min_spread:
+                if count:
+                    self.checks.counts['degenerate_geometry'] += 1
+                return (f'degenerate geometry: the inliers span {100 * spread:.2f} % of the '
+                        f'region of interest (< pipeline.min_inlier_spread {min_spread:g}); '
+                        'collinear or packed in one patch, they do not constrain the plane')
         return ''
 
     def _suspicious(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
@@ -441,12 +555,15 @@ class PlanePipeline:
                         f'last {self._last_energy_per_point:.3g}')
         return self._suspicious_bounds(estimate.homography, size)
 
-    def _suspicious_bounds(self, homography: np.ndarray, size: tuple[int, int]) -> str:
+    def _suspicious_bounds(self, homography: np.ndarray, size: tuple[int, int],
+                           count: bool = True) -> str:
         if self.config.pipeline.check_prior_bounds:
             low, high = self._prior_bounds(size)
             corners = _image_corners(*size)
             mapped = apply_homography(homography, corners)
             if np.any(mapped < low) or np.any(mapped > high):
+                if count:
+                    self.checks.counts['outside_prior'] += 1
                 return 'homography outside the prior: an image corner maps beyond its range'
         return ''
 
@@ -482,6 +599,55 @@ def _better(a: PlaneEstimate | FailedEstimate, b: PlaneEstimate | FailedEstimate
     if not a.ok:
         return a.n_inliers > b.n_inliers
     return a.final_energy < b.final_energy
+
+
+def debug_overlay(left: np.ndarray, result: FrameResult) -> np.ndarray:
+    """Return the (H, W, 3) uint8 RGB debug image of a frame: mask tint, features.
+
+    Inlier corners are cyan circles and inlier segments cyan lines; the rest magenta (all of
+    them when no plane was found).
+
+    Args:
+        left: (H, W) uint8 left image of the frame.
+        result: The pipeline's result for it.
+
+    """
+    pts = result.left_points
+    segs = result.left_lines
+    est = result.estimate
+    if result.ok and pts.shape[0] == est.inliers.shape[0]:
+        inl = est.inliers
+    else:
+        inl = np.zeros(pts.shape[0], bool)
+    if result.ok and segs.shape[0] == est.line_inliers.shape[0]:
+        line_inl = est.line_inliers
+    else:
+        line_inl = np.zeros(segs.shape[0], bool)
+    return overlay(left, result.mask, pts[inl], pts[~inl], segs[line_inl], segs[~line_inl])
+
+
+def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return left and right corners and segments, as ``features.kind`` asks."""
+    kind = cfg.features.kind
+    none_pts = np.zeros((0, 2))
+    none_seg = np.zeros((0, 4))
+    if kind == 'lines':
+        left_pts = right_pts = none_pts
+    else:
+        left_pts = detect_corners(left, cfg.features)
+        right_pts = detect_corners(right, cfg.features)
+    if kind == 'points':
+        left_seg = right_seg = none_seg
+    else:
+        left_seg = detect_lines(left, cfg.features)
+        right_seg = detect_lines(right, cfg.features)
+    return left_pts, right_pts, left_seg, right_seg
+
+
+def _n_left(feats: tuple[np.ndarray, ...]) -> int:
+    """Return the number of left features (corners plus segments)."""
+    return int(feats[0].shape[0] + feats[2].shape[0])
 
 
 def _bounds_prior(prior: PriorConfig) -> PriorConfig:
