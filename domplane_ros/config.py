@@ -126,6 +126,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               0.1, 500.0),
     ParamSpec('pipeline.check_prior_bounds', True, 'bool',
               'Reject homographies that move the image corners outside what the prior allows.'),
+    ParamSpec('pipeline.max_gap_s', 2.0, 'float',
+              'A pair stamped more than this after the previous processed pair drops the warm '
+              'start (a camera drop-out or a pause: the head may have moved meanwhile).',
+              0.001, 1e6),
     # Synchroniser and transport.
     ParamSpec('sync.slop_s', 0.01, 'float',
               'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
@@ -137,6 +141,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('qos.depth', 2, 'int', 'Subscription queue depth.', 1, 100),
     ParamSpec('diagnostics.period_s', 1.0, 'float',
               'Period of the /diagnostics status, seconds.', 0.05, 60.0),
+    ParamSpec('diagnostics.silence_s', 1.0, 'float',
+              'A camera that sends no image for this long is reported: /diagnostics WARN '
+              'naming its topic, and a throttled log warning.', 0.01, 3600.0),
 )
 
 PARAMETERS_BY_NAME: dict[str, ParamSpec] = {spec.name: spec for spec in PARAMETERS}
@@ -325,6 +332,7 @@ class PipelineConfig:
     max_energy_ratio: float = 4.0
     warm_gnc_start_px: float = 6.0
     check_prior_bounds: bool = True
+    max_gap_s: float = 2.0
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""
@@ -350,12 +358,14 @@ class TransportConfig:
     reliable: bool = False
     depth: int = 2
     diagnostics_period_s: float = 1.0
+    silence_s: float = 1.0
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""
         check_value(PARAMETERS_BY_NAME['qos.reliable'], self.reliable)
         check_value(PARAMETERS_BY_NAME['qos.depth'], self.depth)
         check_value(PARAMETERS_BY_NAME['diagnostics.period_s'], self.diagnostics_period_s)
+        check_value(PARAMETERS_BY_NAME['diagnostics.silence_s'], self.silence_s)
 
 
 def _validate_section(obj: Any, section: str) -> None:
@@ -445,7 +455,8 @@ class PlaneNodeConfig:
             sync=SyncConfig(**section('sync')),
             transport=TransportConfig(
                 reliable=values['qos.reliable'], depth=values['qos.depth'],
-                diagnostics_period_s=values['diagnostics.period_s']),
+                diagnostics_period_s=values['diagnostics.period_s'],
+                silence_s=values['diagnostics.silence_s']),
             initial_homography=tuple(values['initial_homography']),
         )
 
@@ -460,6 +471,7 @@ class PlaneNodeConfig:
         out['qos.reliable'] = self.transport.reliable
         out['qos.depth'] = self.transport.depth
         out['diagnostics.period_s'] = self.transport.diagnostics_period_s
+        out['diagnostics.silence_s'] = self.transport.silence_s
         out['initial_homography'] = list(self.initial_homography)
         return out
 

@@ -59,7 +59,9 @@ class PlaneNode(Node):
         super().__init__('plane_node', **kwargs)
         self._values = self._declare_parameters()
         self.config = PlaneNodeConfig.from_flat(self._values)
-        self._lock = threading.Lock()          # guards pipeline, sync and config changes
+        # Guards the pipeline and config changes. Image callbacks never take it (the worker
+        # holds it while processing): they use the synchroniser, which has its own lock.
+        self._lock = threading.Lock()
         self._cv = threading.Condition()       # guards the hand-over slot
         self._pending: Pair | None = None
         self._stop = False
@@ -73,6 +75,10 @@ class PlaneNode(Node):
         self._period_pairs = 0
         self._period_start = time.monotonic()
         self._qos_warned: set[str] = set()
+        # Per camera: monotonic time of the last image (None: none yet), images this period.
+        self._last_image: dict[str, float | None] = {'left': None, 'right': None}
+        self._period_images = {'left': 0, 'right': 0}
+        self._start = time.monotonic()
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         transport = self.config.transport
@@ -91,6 +97,7 @@ class PlaneNode(Node):
                 event_callbacks=SubscriptionEventCallbacks(
                     incompatible_qos=lambda info, s=side: self._on_incompatible_qos(s, info)))
             for side in ('left', 'right')]
+        self._topics = {side: sub.topic_name for side, sub in zip(('left', 'right'), self._subs)}
         self._diag_timer = self.create_timer(transport.diagnostics_period_s,
                                              self._publish_diagnostics)
         self._worker = threading.Thread(target=self._work, name='plane_node_worker',
@@ -168,8 +175,13 @@ class PlaneNode(Node):
             'arrive from it. Set qos.reliable to match the camera driver.')
 
     def _on_image(self, side: str, msg: Image) -> None:
-        with self._lock:
-            pairs = self._sync.add(side, _stamp_ns(msg), msg)
+        now = time.monotonic()
+        last, self._last_image[side] = self._last_image[side], now
+        self._period_images[side] += 1
+        if last is not None and now - last > self.config.transport.silence_s:
+            self.get_logger().info(f'images on {self._topics[side]} again after '
+                                   f'{now - last:.1f} s')
+        pairs = self._sync.add(side, _stamp_ns(msg), msg)
         for pair in pairs:
             with self._cv:
                 if self._pending is not None:
@@ -234,6 +246,12 @@ class PlaneNode(Node):
         rate = self._period_pairs / elapsed
         self._period_pairs = 0
         self._period_start = now
+        cameras = []
+        for side in ('left', 'right'):
+            last = self._last_image[side]
+            cameras.append((self._topics[side], self._period_images[side] / elapsed,
+                            now - (last if last is not None else self._start)))
+            self._period_images[side] = 0
         level, message, values = plane_status(
             rate=rate, latencies_ms=list(self._latency_ms), pairs=self._counters['pairs'],
             processed=self._counters['processed'],
@@ -242,7 +260,10 @@ class PlaneNode(Node):
             decode_errors=self._counters['decode_errors'], lock_state=self.pipeline.state,
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=self._counters['consecutive_failures'],
-            last_result=self._last_result, last_error=self._last_error)
+            last_result=self._last_result, last_error=self._last_error, cameras=cameras,
+            silence_s=self.config.transport.silence_s)
+        if message.startswith('no images on '):
+            self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
             level, message, values))

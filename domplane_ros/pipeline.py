@@ -130,8 +130,9 @@ class PlanePipeline:
         Args:
             left: (H, W) uint8 left grey image.
             right: (H', W') uint8 right grey image.
-            stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one drops
-                the warm start (clock reset, bag loop).
+            stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one (clock
+                reset, bag loop) or more than ``pipeline.max_gap_s`` newer (camera drop-out)
+                drops the warm start.
             reset: Drop the warm start before this frame.
 
         Returns:
@@ -145,7 +146,9 @@ class PlanePipeline:
         check_gray(left, 'left')
         check_gray(right, 'right')
         shapes = (left.shape, right.shape)
-        if (reset or (self._last_stamp_ns is not None and stamp_ns < self._last_stamp_ns)
+        last = self._last_stamp_ns
+        gap_ns = self.config.pipeline.max_gap_s * 1e9
+        if (reset or (last is not None and not 0 <= stamp_ns - last <= gap_ns)
                 or (self._last_shape is not None and shapes != self._last_shape)):
             self.reset()
         self._last_stamp_ns = stamp_ns
