@@ -17,7 +17,7 @@ FAILURES_FOR_ERROR = 3
 def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, processed: int,
                  dropped_busy: int, dropped_sync: int, decode_errors: int, lock_state: str,
                  reinitialisations: int, consecutive_failures: int, last_result: Any,
-                 last_error: str, cameras: Sequence[tuple[str, float, float]] = (),
+                 last_error: str, cameras: Sequence[tuple[str, int, float, float]] = (),
                  silence_s: float = math.inf) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
@@ -34,8 +34,9 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         consecutive_failures: Processed pairs in a row without a plane.
         last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
         last_error: The last error message ('' if none).
-        cameras: Per camera ``(topic, images per second over the last period, seconds since
-            its last image (or since start))``; the live node gives them, the replay not.
+        cameras: Per camera ``(topic, images received, images per second over the last
+            period, seconds since its last image (or since start))``; the live node gives
+            them, the replay not.
         silence_s: A camera silent for longer than this makes the status WARN, naming it.
 
     Returns:
@@ -46,7 +47,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
     """
     lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
     result = last_result
-    silent = [(topic, age) for topic, _, age in cameras if age > silence_s]
+    silent = [(topic, age) for topic, _, _, age in cameras if age > silence_s]
     if silent:
         level, message = WARN, 'no images on ' + ', '.join(
             f'{topic} for {age:.1f} s' for topic, age in silent)
@@ -76,7 +77,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('re-initialisations', reinitialisations),
         ('last error', last_error or 'none'),
     ]
-    for topic, camera_rate, age in cameras:
-        values += [(f'{topic} rate [images/s]', f'{camera_rate:.2f}'),
+    for topic, received, camera_rate, age in cameras:
+        values += [(f'{topic} images received', received),
+                   (f'{topic} rate [images/s]', f'{camera_rate:.2f}'),
                    (f'{topic} last image age [s]', f'{age:.2f}')]
     return level, message, [(key, str(value)) for key, value in values]

@@ -247,16 +247,18 @@ class PlaneNode(Node):
         self._period_pairs = 0
         self._period_start = now
         cameras = []
+        sync = self._sync.stats()
         for side in ('left', 'right'):
             last = self._last_image[side]
-            cameras.append((self._topics[side], self._period_images[side] / elapsed,
+            cameras.append((self._topics[side], getattr(sync, 'received_' + side),
+                            self._period_images[side] / elapsed,
                             now - (last if last is not None else self._start)))
             self._period_images[side] = 0
         level, message, values = plane_status(
             rate=rate, latencies_ms=list(self._latency_ms), pairs=self._counters['pairs'],
             processed=self._counters['processed'],
             dropped_busy=self._counters['dropped_busy'],
-            dropped_sync=self._sync.stats().dropped,
+            dropped_sync=sync.dropped,
             decode_errors=self._counters['decode_errors'], lock_state=self.pipeline.state,
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=self._counters['consecutive_failures'],
@@ -264,6 +266,13 @@ class PlaneNode(Node):
             silence_s=self.config.transport.silence_s)
         if message.startswith('no images on '):
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
+        fastest = max(camera[2] for camera in cameras)
+        if fastest > 0 and self.config.sync.slop_s >= 0.5 / fastest:
+            self.get_logger().warning(
+                f'sync.slop_s {self.config.sync.slop_s:g} s is not below half the frame period '
+                f'({fastest:.0f} images/s): a frame whose partner was lost can be paired with '
+                f'the next frame of the other camera; set sync.slop_s below {0.5 / fastest:.4f}',
+                throttle_duration_sec=60.0)
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
             level, message, values))

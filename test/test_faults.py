@@ -192,7 +192,8 @@ def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
 
 def test_100hz_load_keeps_queues_bounded_newest_wins_and_counts_drops(
         ros_context, small_scene):
-    rig = Rig(ros_context, _prior(small_scene, Parameter('diagnostics.period_s', value=0.5)))
+    rig = Rig(ros_context, _prior(small_scene, Parameter('diagnostics.period_s', value=0.5),
+                                  Parameter('sync.slop_s', value=0.004)))
     node = rig.node
     processed_stamps: list[int] = []
     real_process = node.pipeline.process
@@ -245,6 +246,7 @@ def test_100hz_load_keeps_queues_bounded_newest_wins_and_counts_drops(
         assert int(values['dropped pairs (busy)']) == counters['dropped_busy']
         assert int(values['processed pairs']) == counters['processed']
         assert int(values['dropped frames (sync)']) == stats.dropped
+        assert int(values['/left/image_raw images received']) == stats.received_left
         # Pairs sent but not processed are all counted: busy drops in the node, and frames
         # the synchroniser dropped, still queues or DDS lost (two frames per pair).
         assert (2 * (sent - counters['processed'] - counters['dropped_busy'])
