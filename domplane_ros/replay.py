@@ -21,9 +21,13 @@ Output topics, each written with the bag timestamp of the left image's header st
 * ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``): the node's keys, once per
   ``diagnostics.period_s`` of bag time (1 s by default) and once at the end.
 
-Exit codes: 0 on success; 2 when the run is refused before anything is written (missing or
-unreadable bag, unknown topic, existing output without ``--force``, invalid params file);
-1 when reading fails part-way (a truncated bag, say): the partial output is removed.
+Exit codes: 0 on success; 3 when the output is complete except for messages the bag could
+not give (undecodable payloads: skipped, counted, named on stderr and recorded in the output's
+``metadata.yaml`` ``custom_data``; ``--strict`` makes them fatal); 2 when the run is refused
+before anything is written (missing, unreadable or truncated bag, a folder without
+metadata.yaml, unknown topic, existing output without ``--force``, invalid params file); 1 when
+reading fails part-way (a damaged bag, say): the partial output is removed; 130 on Ctrl-C and
+143 on SIGTERM, the partial output removed.
 
 The output is written into a hidden temporary folder next to ``OUTPUT_BAG`` and renamed into
 place only when it is complete, so an interrupted run never leaves a bag that looks complete.
@@ -40,6 +44,7 @@ from dataclasses import dataclass, field
 import os
 from pathlib import Path
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -72,6 +77,9 @@ STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_REFUSED = 2
+EXIT_SKIPPED = 3          # complete, but messages the bag could not give were skipped
+EXIT_INTERRUPTED = 130    # Ctrl-C
+EXIT_TERMINATED = 143     # SIGTERM
 
 # As plane_node: the latency statistics over the last this many pairs.
 _LATENCY_WINDOW = 200
@@ -88,6 +96,10 @@ CSV_COLUMNS = (
 
 class BagReadError(BagError):
     """Reading a bag failed part-way (a truncated or corrupt file)."""
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived; raised like Ctrl-C so that the partial output is removed."""
 
 
 def _typestore() -> Any:
@@ -214,12 +226,22 @@ class ReplaySession:
 
     Args:
         config: The configuration (the node's parameters).
+        topics: The left and right topic names, for the per-camera diagnostics.
 
     """
 
-    def __init__(self, config: PlaneNodeConfig | None = None) -> None:
+    def __init__(self, config: PlaneNodeConfig | None = None,
+                 topics: tuple[str, str] = ('/left/image_raw', '/right/image_raw')) -> None:
         """Make a fresh pipeline and synchroniser from the configuration."""
         self.config = config if config is not None else PlaneNodeConfig()
+        self.topics = dict(zip(('left', 'right'), topics))
+        # Per camera, in bag time (header stamps): the last stamp, images received, and the
+        # count at the last diagnostics; the node keeps the same in wall time.
+        self._last_stamp_ns: dict[str, int | None] = {'left': None, 'right': None}
+        self._received = {'left': 0, 'right': 0}
+        self._received_mark = {'left': 0, 'right': 0}
+        self._first_ns: int | None = None
+        self._diag_ns: int | None = None
         self.pipeline = PlanePipeline(self.config)
         self.sync = ApproximateTimeSync(self.config.sync.slop_s, self.config.sync.queue_size)
         self.counters = _Counters()
@@ -240,7 +262,12 @@ class ReplaySession:
 
         """
         frames = []
-        for pair in self.sync.add(side, header_stamp_ns(msg), msg):
+        stamp_ns = header_stamp_ns(msg)
+        self._received[side] += 1
+        self._last_stamp_ns[side] = stamp_ns
+        if self._first_ns is None:
+            self._first_ns = stamp_ns
+        for pair in self.sync.add(side, stamp_ns, msg):
             self.counters.pairs += 1
             frame = self.process(pair)
             if frame is not None:
@@ -283,11 +310,14 @@ class ReplaySession:
         self.counters.undecodable_messages += 1
         self.last_error = error
 
-    def diagnostic_values(self, rate: float) -> tuple[int, str, list[tuple[str, str]]]:
+    def diagnostic_values(self, rate: float, now_ns: int | None = None
+                          ) -> tuple[int, str, list[tuple[str, str]]]:
         """Return the node's diagnostics for the state now.
 
         Args:
             rate: Pairs per second over the last diagnostics period (bag time).
+            now_ns: Bag time of the diagnostics, for the per-camera rates and ages (default:
+                the newest stamp received).
 
         Returns:
             ``(level, message, values)``: the DiagnosticStatus level (0 OK, 1 WARN, 2 ERROR),
@@ -295,6 +325,18 @@ class ReplaySession:
 
         """
         counters = self.counters
+        stamps = [s for s in self._last_stamp_ns.values() if s is not None]
+        now = now_ns if now_ns is not None else max(stamps, default=0)
+        span_s = (now - self._diag_ns) * 1e-9 if self._diag_ns is not None else 0.0
+        cameras = []
+        for side in ('left', 'right'):
+            new = self._received[side] - self._received_mark[side]
+            last = self._last_stamp_ns[side]
+            since = last if last is not None else (self._first_ns or now)
+            cameras.append((self.topics[side], self._received[side],
+                            new / span_s if span_s > 0 else rate, max(now - since, 0) * 1e-9))
+            self._received_mark[side] = self._received[side]
+        self._diag_ns = now
         return plane_status(
             rate=rate, latencies_ms=self.latencies_ms[-_LATENCY_WINDOW:], pairs=counters.pairs,
             processed=counters.processed, dropped_busy=0,
@@ -303,7 +345,8 @@ class ReplaySession:
             lock_state=self.pipeline.state,
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=counters.consecutive_failures, last_result=self.last_result,
-            last_error=self.last_error)
+            last_error=self.last_error, cameras=cameras,
+            silence_s=self.config.transport.silence_s)
 
 
 # --------------------------------------------------------------------------------------------
@@ -321,6 +364,16 @@ class BagMessage(NamedTuple):
 def _describe_error(err: BaseException) -> str:
     text = str(err).strip().rstrip('.')
     return f'{type(err).__name__}: {text}' if text else type(err).__name__
+
+
+def _damage_hint(err: BaseException) -> str:
+    text = str(err)
+    if 'end magic' in text:
+        return (' (the MCAP file is truncated: it has no footer, as when a recording is killed; '
+                "'mcap recover' can rebuild it)")
+    if 'malformed' in text or 'not a database' in text:
+        return ' (the sqlite3 file is truncated or damaged)'
+    return ''
 
 
 def _storage_name(reader: Reader) -> str:
@@ -353,12 +406,17 @@ class BagInput:
             raise BagError(f'input bag {str(self.path)!r} does not exist')
         self.typestore = _typestore()
         self.undecodable: list[str] = []
+        if self.path.is_dir() and not (self.path / 'metadata.yaml').exists():
+            files = sorted(p.name for p in self.path.iterdir() if p.suffix in ('.db3', '.mcap'))
+            hint = (f'; to read its storage file alone, give {str(self.path / files[0])!r}'
+                    if files else '; it holds no .db3 or .mcap file either')
+            raise BagError(f'bag folder {str(self.path)!r} has no metadata.yaml' + hint)
         try:
             self._reader = Reader(self.path)
             self._reader.open()
         except Exception as err:  # noqa: B902 - rosbags raises many types on corrupt input
-            raise BagError(
-                f'cannot read bag {str(self.path)!r}: {_describe_error(err)}') from err
+            raise BagError(f'cannot read bag {str(self.path)!r}: {_describe_error(err)}'
+                           + _damage_hint(err)) from err
         try:
             self.storage = _storage_name(self._reader)
             topics = {name: info.msgtype for name, info in self._reader.topics.items()}
@@ -532,6 +590,10 @@ class BagOutput:
                                 frame_id=''),
             status=[status])
         self._write(self._conn_diag, DIAGNOSTICS_TOPIC, stamp_ns, msg)
+
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Record a key/value string in the output bag's metadata.yaml ``custom_data``."""
+        self._writer.set_custom_data(key, value)
 
     def commit(self) -> None:
         """Close the bag and move it into place."""
@@ -752,7 +814,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                right_topic: str = '/right/image_raw', storage: str | None = None,
                force: bool = False, csv_path: str | os.PathLike[str] | None = None,
                progress: bool = False,
-               on_frame: Callable[[ReplayedFrame], None] | None = None) -> ReplaySummary:
+               on_frame: Callable[[ReplayedFrame], None] | None = None,
+               strict: bool = False) -> ReplaySummary:
     """Replay a bag through the pipeline and write the node's outputs to a new bag.
 
     Everything that can be checked up front is checked before anything is written.
@@ -768,12 +831,15 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
         csv_path: If given, write one CSV row per processed pair there.
         progress: Show a progress bar on stderr.
         on_frame: Called with every processed pair, after it is written.
+        strict: Fail (``BagReadError``, partial output removed) on the first message that
+            cannot be deserialised, instead of skipping and counting it.
 
     Returns:
         The summary.
 
     Raises:
-        BagReadError: If reading fails part-way; the partial output is removed.
+        BagReadError: If reading fails part-way (or, with ``strict``, a message cannot be
+            deserialised); the partial output is removed.
         BagError: If the run is refused (missing or unreadable bag, unknown topic, existing
             output); nothing is written.
         ValueError: If ``storage`` is not one of the names in :data:`STORAGES`.
@@ -791,7 +857,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     with BagInput(input_path, left_topic, right_topic) as bag:
         out_storage = storage or bag.storage
         summary = ReplaySummary(str(input_path), str(output_path), out_storage)
-        session = ReplaySession(config)
+        session = ReplaySession(config, (left_topic, right_topic))
         clock = _DiagnosticsClock(config.transport.diagnostics_period_s)
         output = BagOutput(output_path, out_storage, replace=force)
         table = _CsvOutput(csv_file) if csv_file is not None else None
@@ -799,6 +865,9 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
         try:
             n_undecodable = 0
             for item in bag.messages():
+                if strict and bag.undecodable:
+                    raise BagReadError(f'bag {str(input_path)!r}: {bag.undecodable[0]} '
+                                       '(--strict)')
                 while n_undecodable < len(bag.undecodable):
                     session.note_undecodable(bag.undecodable[n_undecodable])
                     n_undecodable += 1
@@ -809,7 +878,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                     summary.right_messages += 1
                 for frame in session.add(item.side, item.msg):
                     for stamp_ns, rate in clock.due(frame.pair.left_stamp_ns):
-                        output.write_diagnostics(stamp_ns, *session.diagnostic_values(rate))
+                        output.write_diagnostics(stamp_ns,
+                                                 *session.diagnostic_values(rate, stamp_ns))
                     output.write_frame(frame)
                     if table is not None:
                         table.write(frame.result)
@@ -822,9 +892,15 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
             while n_undecodable < len(bag.undecodable):
                 session.note_undecodable(bag.undecodable[n_undecodable])
                 n_undecodable += 1
+            if strict and bag.undecodable:
+                raise BagReadError(f'bag {str(input_path)!r}: {bag.undecodable[0]} (--strict)')
             last = clock.final()
             if last is not None:
-                output.write_diagnostics(last[0], *session.diagnostic_values(last[1]))
+                output.write_diagnostics(last[0],
+                                         *session.diagnostic_values(last[1], last[0]))
+            output.set_custom_data('plane_replay.input_bag', str(input_path))
+            output.set_custom_data('plane_replay.skipped_messages',
+                                   str(len(bag.undecodable)))
             bar.close()
             if table is not None:
                 table.commit()
@@ -906,6 +982,9 @@ def build_parser() -> argparse.ArgumentParser:
                         help='replace an existing OUTPUT_BAG (and --csv file)')
     parser.add_argument('--csv', metavar='FILE',
                         help='write one CSV row per processed pair to FILE')
+    parser.add_argument('--strict', action='store_true',
+                        help='fail (exit 1, output removed) on the first message that cannot '
+                             'be deserialised, instead of skipping it (exit 3)')
     bar = parser.add_mutually_exclusive_group()
     bar.add_argument('--no-progress', dest='progress', action='store_false', default=None,
                      help='no progress bar (the default when stderr is not a terminal)')
@@ -925,8 +1004,10 @@ def main(argv: list[str] | None = None) -> int:
         argv: Arguments without the program name (default: ``sys.argv[1:]``).
 
     Returns:
-        0 on success, 2 if the run was refused (nothing written), 1 if it failed part-way
-        (the partial output removed).
+        0 on success; 3 when the output is complete except for messages the bag could not
+        give (skipped, counted and named on stderr); 2 if the run was refused (nothing
+        written); 1 if it failed part-way (the partial output removed); 130 on Ctrl-C and
+        143 on SIGTERM (the partial output removed).
 
     """
     parser = build_parser()
@@ -942,11 +1023,15 @@ def main(argv: list[str] | None = None) -> int:
                else f'params file {args.params_file!r}: {err}')
         return EXIT_REFUSED
     progress = args.progress if args.progress is not None else sys.stderr.isatty()
+    installed, previous = _terminate_like_ctrl_c()
     try:
         summary = run_replay(args.input_bag, args.output_bag, config,
                              left_topic=args.left_topic, right_topic=args.right_topic,
                              storage=args.storage, force=args.force, csv_path=args.csv,
-                             progress=progress)
+                             progress=progress, strict=args.strict)
+    except Terminated:
+        _error('terminated (SIGTERM); the partial output was removed')
+        return EXIT_TERMINATED
     except BagReadError as err:
         _error(f'{err}; the partial output was removed')
         return EXIT_FAILED
@@ -958,9 +1043,34 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_FAILED
     except KeyboardInterrupt:
         _error('interrupted; the partial output was removed')
-        return 130
+        return EXIT_INTERRUPTED
+    finally:
+        if installed:
+            signal.signal(signal.SIGTERM, previous)
     print('\n'.join(summary.lines()))
+    if summary.undecodable_messages:
+        print(f'{PROG}: warning: {summary.undecodable_messages} message(s) of '
+              f'{summary.input_bag!r} could not be read and were skipped (first: '
+              f'{summary.first_errors[0]}); {summary.output_bag!r} records the count in '
+              'metadata.yaml custom_data plane_replay.skipped_messages', file=sys.stderr)
+        return EXIT_SKIPPED
     return EXIT_OK
+
+
+def _terminate_like_ctrl_c() -> tuple[bool, Any]:
+    """Make SIGTERM raise :class:`Terminated` (main thread only).
+
+    Returns:
+        ``(installed, previous handler)``.
+
+    """
+    def on_sigterm(signum: int, frame: Any) -> None:
+        raise Terminated()
+
+    try:
+        return True, signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:   # not the main thread: leave SIGTERM alone
+        return False, None
 
 
 if __name__ == '__main__':
