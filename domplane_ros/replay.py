@@ -767,17 +767,29 @@ class _DiagnosticsClock:
             # First pair, or the stamps went back (a bag loop): start a new period.
             self.start_ns, self.pairs = stamp_ns, 0
         else:
-            end = self.start_ns + self.period_ns
-            if stamp_ns >= end:
-                out.append((end, self.pairs / (self.period_ns * 1e-9)))
-                self.start_ns, self.pairs = end, 0
-                periods = (stamp_ns - end) // self.period_ns
-                if periods >= 1:
-                    end = self.start_ns + periods * self.period_ns
-                    out.append((end, 0.0))
-                    self.start_ns = end
+            out = self.tick(stamp_ns)
         self.pairs += 1
         self.last_ns = stamp_ns
+        return out
+
+    def tick(self, stamp_ns: int) -> list[tuple[int, float]]:
+        """Return ``(stamp, rate)`` of the periods that ended before a message at ``stamp_ns``.
+
+        Called for every image message, so that a camera drop-out (images on one side only)
+        gets a diagnostics message per period, as the node sends.
+        """
+        out: list[tuple[int, float]] = []
+        if self.start_ns is None or stamp_ns < self.start_ns:
+            return out
+        end = self.start_ns + self.period_ns
+        if stamp_ns >= end:
+            out.append((end, self.pairs / (self.period_ns * 1e-9)))
+            self.start_ns, self.pairs = end, 0
+            periods = (stamp_ns - end) // self.period_ns
+            if periods >= 1:
+                end = self.start_ns + periods * self.period_ns
+                out.append((end, 0.0))
+                self.start_ns = end
         return out
 
     def final(self) -> tuple[int, float] | None:
@@ -871,6 +883,9 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                 while n_undecodable < len(bag.undecodable):
                     session.note_undecodable(bag.undecodable[n_undecodable])
                     n_undecodable += 1
+                for stamp_ns, rate in clock.tick(header_stamp_ns(item.msg)):
+                    output.write_diagnostics(stamp_ns,
+                                             *session.diagnostic_values(rate, stamp_ns))
                 if item.side == 'left':
                     summary.left_messages += 1
                     bar.update(1)

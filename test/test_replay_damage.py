@@ -16,7 +16,7 @@ import subprocess
 import sys
 import time
 
-from domplane_ros.replay import main
+from domplane_ros.replay import main, run_replay
 from domplane_ros.scene import scene_sequence
 import numpy as np
 import pytest
@@ -157,7 +157,7 @@ def slow(self, *args, **kwargs):
     time.sleep(0.2)
     return real(self, *args, **kwargs)
 pipeline.PlanePipeline.process = slow
-from domplane_ros.replay import main
+from domplane_ros.replay import main, run_replay
 sys.exit(main(sys.argv[1:]))
 """
 
@@ -190,3 +190,35 @@ def test_signal_mid_replay_removes_partial_output(tmp_path, frames, sig, code, n
     assert len(lines) == 1 and needle in lines[0] and 'partial output was removed' in lines[0]
     assert out == ''
     assert tree(tmp_path) == before
+
+
+def test_camera_dropout_in_a_bag_is_reported_and_the_warm_start_dropped(tmp_path, frames):
+    # 10 Hz; the right camera is silent from 0.5 s to 2.5 s (bag time).
+    path = tmp_path / 'in'
+    period = 100_000_000
+    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conns = [writer.add_connection(t, 'sensor_msgs/msg/Image', typestore=TS)
+                 for t in (LEFT, RIGHT)]
+        for i in range(40):
+            stamp = _left_stamp(0) + i * period
+            frame = frames[0]
+            for conn, gray, offset in ((conns[0], frame.left, 0),
+                                       (conns[1], frame.right, RIGHT_OFFSET_NS)):
+                if conn is conns[1] and 5 <= i < 25:
+                    continue
+                _, msg = _image_msg(gray, stamp + offset, 'cam', False)
+                writer.write(conn, stamp + offset, TS.serialize_cdr(msg, 'sensor_msgs/msg/Image'))
+    summary = run_replay(path, tmp_path / 'out')
+    assert summary.processed == 20
+    bag = read_bag(tmp_path / 'out')
+    statuses = [(t, m.status[0]) for t, m in bag['messages']['/diagnostics']]
+    warns = [(t, s) for t, s in statuses if f'no images on {RIGHT}' in s.message]
+    assert warns and all(_left_stamp(0) + 15 * period < t <= _left_stamp(0) + 25 * period
+                         for t, _ in warns), [(t, s.message) for t, s in statuses]
+    assert LEFT not in warns[0][1].message
+    values = {kv.key: kv.value for kv in warns[0][1].values}
+    assert float(values[f'{RIGHT} last image age [s]']) > 1.0
+    assert statuses[-1][1].level == 0 and values[f'{LEFT} images received'] == str(
+        sum(1 for i in range(40) if _left_stamp(0) + i * period < warns[0][0]))
+    # The 2 s gap is longer than pipeline.max_gap_s: the first pair after it re-initialised.
+    assert summary.reinitialisations == 2
