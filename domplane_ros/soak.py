@@ -90,6 +90,7 @@ def run(args: argparse.Namespace) -> int:
     session = ReplaySession(PlaneNodeConfig(prior=_prior_for(frames[0])))
 
     times_ms = np.full(args.pairs, np.nan)
+    cpu_ms = np.full(args.pairs, np.nan)       # thread CPU time: robust to a busy machine
     rss = []             # (pair index, rss MB, peak MB)
     errors = []          # transfer error of good pairs that found a plane
     outcomes = {'plane': 0, 'no plane': 0, 'decode error': 0, 'not paired': 0}
@@ -117,10 +118,11 @@ def run(args: argparse.Namespace) -> int:
         elif kind == 'gap':
             stamp += 5_000_000_000
         stamp += PERIOD_NS
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.thread_time()
         done = session.add('left', _message(left, stamp, encoding))
         done += session.add('right', _message(right, stamp + 1000))
         times_ms[k] = 1e3 * (time.perf_counter() - t0)
+        cpu_ms[k] = 1e3 * (time.thread_time() - c0)
         if not done:
             key = 'decode error' if kind == 'bad_encoding' else 'not paired'
             outcomes[key] += 1
@@ -140,12 +142,22 @@ def run(args: argparse.Namespace) -> int:
     bar.close()
     gc.collect()
     rss.append((args.pairs - 1, *rss_mb(os.getpid())))
-    return _report(args, times_ms, rss, start_rss, errors, outcomes, bad_counts, session)
+    return _report(args, times_ms, cpu_ms, rss, start_rss, errors, outcomes, bad_counts,
+                   session)
 
 
-def _report(args, times_ms, rss, start_rss, errors, outcomes, bad_counts, session) -> int:
+def _time_line(name: str, values: np.ndarray) -> str:
+    n = len(values)
+    first, last = values[:min(1000, n)], values[-min(1000, n):]
+    return (f'{name}first 1000 median {np.median(first):.2f} ms (p95 '
+            f'{np.percentile(first, 95):.2f}), last 1000 median {np.median(last):.2f} ms (p95 '
+            f'{np.percentile(last, 95):.2f}); slope {_slope_per_1000(values):+.3f} ms per '
+            '1000 pairs')
+
+
+def _report(args, times_ms, cpu_ms, rss, start_rss, errors, outcomes, bad_counts,
+            session) -> int:
     n = len(times_ms)
-    first, last = times_ms[:min(1000, n)], times_ms[-min(1000, n):]
     rss_arr = np.array(rss)
     rss_slope = (float(np.polyfit(rss_arr[:, 0], rss_arr[:, 1], 1)[0] * 1000.0)
                  if len(rss_arr) > 2 else float('nan'))
@@ -160,19 +172,17 @@ def _report(args, times_ms, rss, start_rss, errors, outcomes, bad_counts, sessio
         print(f'transfer error:     median {np.median(errs):.3f} px, p95 '
               f'{np.percentile(errs, 95):.3f} px, < 1 px {100 * np.mean(errs < 1):.2f} % of '
               f'{errs.size} good pairs with a plane')
-    print(f'per-pair time:      first 1000 median {np.median(first):.2f} ms (p95 '
-          f'{np.percentile(first, 95):.2f}), last 1000 median {np.median(last):.2f} ms (p95 '
-          f'{np.percentile(last, 95):.2f}); slope {_slope_per_1000(times_ms):+.3f} ms per '
-          '1000 pairs')
+    print(_time_line('per-pair wall:      ', times_ms))
+    print(_time_line('per-pair CPU:       ', cpu_ms))
     print(f'RSS:                start {start_rss[1]:.1f} MB (after 100 pairs), end '
           f'{rss_arr[-1, 1]:.1f} MB, peak {rss_arr[:, 2].max():.1f} MB; slope '
           f'{rss_slope:+.3f} MB per 1000 pairs')
     if args.output:
-        _plot(Path(args.output), times_ms, rss_arr)
+        _plot(Path(args.output), times_ms, cpu_ms, rss_arr)
     return 0
 
 
-def _plot(out: Path, times_ms: np.ndarray, rss_arr: np.ndarray) -> None:
+def _plot(out: Path, times_ms: np.ndarray, cpu_ms: np.ndarray, rss_arr: np.ndarray) -> None:
     import matplotlib
 
     matplotlib.use('Agg')
@@ -182,10 +192,12 @@ def _plot(out: Path, times_ms: np.ndarray, rss_arr: np.ndarray) -> None:
     step = 100
     n = len(times_ms) // step
     blocks = times_ms[:n * step].reshape(n, step)
+    cpu_blocks = cpu_ms[:n * step].reshape(n, step)
     x = (np.arange(n) + 0.5) * step
     fig, (ax1, ax2) = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
-    ax1.plot(x, np.median(blocks, axis=1), label='median per 100 pairs')
-    ax1.plot(x, np.percentile(blocks, 95, axis=1), label='p95 per 100 pairs', alpha=0.7)
+    ax1.plot(x, np.median(blocks, axis=1), label='wall, median per 100 pairs')
+    ax1.plot(x, np.percentile(blocks, 95, axis=1), label='wall, p95 per 100 pairs', alpha=0.6)
+    ax1.plot(x, np.median(cpu_blocks, axis=1), label='CPU, median per 100 pairs')
     ax1.set_ylabel('per-pair time [ms]')
     ax1.legend()
     ax1.grid(alpha=0.3)
