@@ -35,8 +35,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
         last_error: The last error message ('' if none).
         cameras: Per camera ``(topic, images received, images per second over the last
-            period, seconds since its last image (or since start))``; the live node gives
-            them, the replay not.
+            period, seconds since its last image (or since start))``; wall time in the node,
+            header-stamp time in the replay.
         silence_s: A camera silent for longer than this makes the status WARN, naming it.
 
     Returns:
