@@ -105,9 +105,14 @@ def run(args: argparse.Namespace) -> int:
                             tilt_jitter_deg=0.0, vergence_jitter_deg=0.0)
     order = list(range(len(frames)))
     domain_id = args.domain_id if args.domain_id is not None else random.randint(101, 200)
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain_id),
-               ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST', **_THREAD_ENV)
-    os.environ.update(ROS_DOMAIN_ID=str(domain_id), ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    dds = {'ROS_DOMAIN_ID': str(domain_id), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
+    if args.fastdds_profile:
+        profile = str(Path(args.fastdds_profile).resolve())
+        dds.update(FASTDDS_DEFAULT_PROFILES_FILE=profile, FASTRTPS_DEFAULT_PROFILES_FILE=profile)
+    print('Fast DDS profile: ' + (dds.get('FASTDDS_DEFAULT_PROFILES_FILE')
+                                  or os.environ.get('FASTDDS_DEFAULT_PROFILES_FILE', 'default')))
+    env = dict(os.environ, **dds, **_THREAD_ENV)
+    os.environ.update(dds)
     with tempfile.TemporaryDirectory(prefix='domplane_load_') as tmp:
         params = _params_file(frames[0], tmp, args.diagnostics_period, 0.4 / args.rate,
                               args.qos_depth)
@@ -201,6 +206,11 @@ def _drive(args: argparse.Namespace, frames: list, order: list[int],
         end = time.monotonic() + 0.2
         while time.monotonic() < end:
             executor.spin_once(timeout_sec=0.01)
+    # Counters from a diagnostics message that covers every warm-up image.
+    n_diag = len(diagnostics)
+    end = time.monotonic() + 10.0
+    while len(diagnostics) < n_diag + 2 and time.monotonic() < end:
+        executor.spin_once(timeout_sec=0.05)
     base = dict(diagnostics[-1]) if diagnostics else {}
     masks.clear()
     homographies.clear()
@@ -258,8 +268,11 @@ def _drive(args: argparse.Namespace, frames: list, order: list[int],
 
 def _report_dropout(args, frames, diagnostics, homographies, h_times) -> None:
     t_stop, t_back = args.dropout[0], args.dropout[0] + args.dropout[1]
-    warn = [d for d in diagnostics if d['_level'] == '1' and '/right/image_raw' in d['_message']
-            and 'no images on' in d['_message']]
+    during = [d for d in diagnostics
+              if t_stop <= float(d['_t']) <= t_back + args.diagnostics_period]
+    warn = [d for d in during if d['_level'] == '1' and 'no images on' in d['_message']
+            and '/right/image_raw' in d['_message']]
+    before = [d for d in diagnostics if 0 <= float(d['_t']) < t_stop]
     ok_after = [d for d in diagnostics if float(d['_t']) > t_back and d['_level'] == '0']
     h_after = [(t, h) for t, h in zip(h_times, homographies) if t > t_back]
     print(f'\ndrop-out: right camera silent from {t_stop:g} s to {t_back:g} s '
@@ -270,8 +283,10 @@ def _report_dropout(args, frames, diagnostics, homographies, h_times) -> None:
     else:
         print('  no WARN naming the right camera')
     if ok_after:
+        reinit = (int(ok_after[0]['re-initialisations']) - int(before[-1]['re-initialisations'])
+                  if before else 'n/a')
         print(f'  status OK again {float(ok_after[0]["_t"]) - t_back:.2f} s after the return: '
-              f'"{ok_after[0]["_message"]}"')
+              f'"{ok_after[0]["_message"]}"; re-initialisations across the gap: {reinit}')
     if h_after:
         err = _transfer_error_px(h_after[0][1].reshape(3, 3), frames[0])
         print(f'  first homography {h_after[0][0] - t_back:.2f} s after the return, transfer '
@@ -342,6 +357,9 @@ def main(argv: list[str] | None = None) -> int:
                         help="the node's qos.depth (subscription queue depth)")
     parser.add_argument('--dropout', type=float, nargs=2, metavar=('START_S', 'LENGTH_S'),
                         help='the right camera stops at START_S for LENGTH_S seconds')
+    parser.add_argument('--fastdds-profile', metavar='XML',
+                        help='Fast DDS profile for both processes, e.g. '
+                             'config/fastdds_large_images.xml (default: none, stock Fast DDS)')
     parser.add_argument('--domain-id', type=int, default=None,
                         help='DDS domain (default: a random one in 101..200)')
     return run(parser.parse_args(argv))
