@@ -4,7 +4,8 @@ Run ``python -m domplane_ros.bench_pipeline`` (or ``make bench``). One core (BLA
 pinned to one thread). It prints:
 
 * per-pair latency of decode + features + warm-started estimate + mask on a rendered moving
-  stereo sequence at 640x480 and 1280x720, median and p95, beside a baseline run in the same
+  stereo sequence at 640x480 and 1280x720, median and p95 (and of the bad-input checks of
+  :class:`~domplane_ros.health.PairChecks` alone), beside a baseline run in the same
   process on the same messages: decode + ORB (1000 features) + brute-force Hamming matching +
   ``cv2.findHomography`` with USAC_MAGSAC;
 * end-to-end latency through DDS on loopback (image header stamp to the mask's arrival at a
@@ -25,6 +26,7 @@ for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
 import cv2  # noqa: E402
 from domplane_ros.bench import machine_name  # noqa: E402
 from domplane_ros.config import PlaneNodeConfig, PriorConfig  # noqa: E402
+from domplane_ros.health import PairChecks  # noqa: E402
 from domplane_ros.homography import apply_homography  # noqa: E402
 from domplane_ros.image import message_to_gray  # noqa: E402
 from domplane_ros.pipeline import PlanePipeline  # noqa: E402
@@ -87,6 +89,14 @@ def bench_latency(width: int, height: int, n_frames: int, seed: int) -> None:
         if i > 0:  # the first pair is the cold start
             ours.append(elapsed)
             ours_err.append(_error(result.homography, frames[i]))
+    # The bad-input checks alone (part of the pipeline's time): size, frozen camera, clipping.
+    checks = PairChecks(config.pipeline.max_clipped_fraction, config.pipeline.max_stamp_jump_s)
+    check_times = []
+    for i, (lm, rm) in enumerate(msgs):
+        left, right = message_to_gray(lm), message_to_gray(rm)
+        t = time.perf_counter()
+        checks.check(left, right, i * 33_000_000)
+        check_times.append(time.perf_counter() - t)
     orb = cv2.ORB_create(nfeatures=1000)
     matcher = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True)
     base, base_err = [], []
@@ -96,13 +106,16 @@ def bench_latency(width: int, height: int, n_frames: int, seed: int) -> None:
         base.append(time.perf_counter() - t)
         base_err.append(_error(h, frames[i]))
 
-    def row(name, times, errs):
+    def row(name, times, errs=None):
         ms = 1e3 * np.asarray(times)
-        errs = np.asarray(errs)
-        print(f'{width}x{height:<5d} {name:28s} {np.median(ms):8.2f} {np.percentile(ms, 95):8.2f}'
-              f'   {np.median(errs):8.3f} {100 * np.mean(errs < 1.0):6.1f} %')
+        line = f'{width}x{height:<5d} {name:28s} {np.median(ms):8.2f} {np.percentile(ms, 95):8.2f}'
+        if errs is not None:
+            errs = np.asarray(errs)
+            line += f'   {np.median(errs):8.3f} {100 * np.mean(errs < 1.0):6.1f} %'
+        print(line)
 
     row('domplane (warm, full)', ours, ours_err)
+    row('  of which input checks', check_times[1:])
     row('ORB + BF + MAGSAC baseline', base, base_err)
 
 

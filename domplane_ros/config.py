@@ -126,10 +126,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               0.1, 500.0),
     ParamSpec('pipeline.check_prior_bounds', True, 'bool',
               'Reject homographies that move the image corners outside what the prior allows.'),
-    ParamSpec('pipeline.max_gap_s', 2.0, 'float',
-              'A pair stamped more than this after the previous processed pair drops the warm '
-              'start (a camera drop-out or a pause: the head may have moved meanwhile).',
-              0.001, 1e6),
+    ParamSpec('pipeline.min_inlier_spread', 0.02, 'float',
+              'Smallest convex-hull area of the inliers, as a fraction of the features.roi '
+              'area; collinear inliers or inliers in one small patch leave the homography '
+              'unconstrained and fail the frame (0 disables).', 0.0, 1.0),
+    ParamSpec('pipeline.max_clipped_fraction', 0.6, 'float',
+              'A frame with more than this fraction of black (grey <= 2) or saturated '
+              '(grey >= 253) pixels is refused (1 disables).', 0.01, 1.0),
+    ParamSpec('pipeline.max_stamp_jump_s', 10.0, 'float',
+              'A pair stamped more than this many seconds after the last one drops the warm '
+              'start (as a stamp going backwards does).', 0.001, 1e6),
     # Synchroniser and transport.
     ParamSpec('sync.slop_s', 0.01, 'float',
               'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
@@ -332,7 +338,9 @@ class PipelineConfig:
     max_energy_ratio: float = 4.0
     warm_gnc_start_px: float = 6.0
     check_prior_bounds: bool = True
-    max_gap_s: float = 2.0
+    min_inlier_spread: float = 0.02
+    max_clipped_fraction: float = 0.6
+    max_stamp_jump_s: float = 10.0
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
+from domplane_ros.health import input_diagnostic_values
 import numpy as np
 
 # diagnostic_msgs/DiagnosticStatus levels.
@@ -17,7 +18,8 @@ FAILURES_FOR_ERROR = 3
 def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, processed: int,
                  dropped_busy: int, dropped_sync: int, decode_errors: int, lock_state: str,
                  reinitialisations: int, consecutive_failures: int, last_result: Any,
-                 last_error: str, cameras: Sequence[tuple[str, int, float, float]] = (),
+                 last_error: str, input_counts: Sequence[Mapping[str, int]] = (),
+                 input_warning: str = '', cameras: Sequence[tuple[str, int, float, float]] = (),
                  silence_s: float = math.inf) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
@@ -32,21 +34,30 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         lock_state: The pipeline's lock state.
         reinitialisations: Frames started from the prior.
         consecutive_failures: Processed pairs in a row without a plane.
-        last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None.
+        last_result: The last :class:`~domplane_ros.pipeline.FrameResult`, or None (also
+            when the last pair could not be decoded).
         last_error: The last error message ('' if none).
+        input_counts: Counts of input problems (see :mod:`domplane_ros.health`), summed and
+            shown one key per kind.
+        input_warning: An input problem seen since the last status that did not fail a pair
+            (a zero stamp, a stamp jump, stamp skew beyond the slop); it makes an OK status a
+            WARN and is appended to the message.
         cameras: Per camera ``(topic, images received, images per second over the last
             period, seconds since its last image (or since start))``; wall time in the node,
             header-stamp time in the replay.
         silence_s: A camera silent for longer than this makes the status WARN, naming it.
 
     Returns:
-        ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, or the
-        last pair had no plane) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a row without a
-        plane); a one-line message; key/value pairs as strings.
+        ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
+        pair had no plane, or an input warning) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a
+        row without a plane); a one-line message; key/value pairs as strings.
 
     """
     lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
     result = last_result
+    # The last pair's failure: the pipeline's reason, or (no result: it was not decoded) the
+    # last error.
+    reason = result.reason if result is not None and not result.ok else last_error
     silent = [(topic, age) for topic, _, _, age in cameras if age > silence_s]
     if silent:
         level, message = WARN, 'no images on ' + ', '.join(
@@ -54,12 +65,14 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
     elif rate == 0.0:
         level, message = WARN, 'no stereo pairs received'
     elif consecutive_failures >= FAILURES_FOR_ERROR:
-        level, message = ERROR, f'no plane for {consecutive_failures} pairs: ' + (
-            result.reason if result is not None else '')
-    elif result is not None and not result.ok:
-        level, message = WARN, f'no plane: {result.reason}'
+        level, message = ERROR, f'no plane for {consecutive_failures} pairs: {reason}'
+    elif consecutive_failures > 0 or (result is not None and not result.ok):
+        level, message = WARN, f'no plane: {reason}'
     else:
         level, message = OK, 'plane ' + lock_state
+    if input_warning:
+        level = max(level, WARN)
+        message += f'; {input_warning}'
     ok = result is not None and result.ok
     values = [
         ('input rate [pairs/s]', f'{rate:.2f}'),
@@ -77,6 +90,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('re-initialisations', reinitialisations),
         ('last error', last_error or 'none'),
     ]
+    values += input_diagnostic_values(*input_counts)
     for topic, received, camera_rate, age in cameras:
         values += [(f'{topic} images received', received),
                    (f'{topic} rate [images/s]', f'{camera_rate:.2f}'),

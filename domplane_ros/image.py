@@ -96,23 +96,24 @@ def _data_bytes(data: Any) -> np.ndarray:
     """
     if isinstance(data, np.ndarray):
         if data.dtype != np.uint8:
-            raise ImageDecodeError(f'image data must have dtype uint8, got {data.dtype}')
+            raise ImageDecodeError(f'image data must have dtype uint8, got {data.dtype}',
+                                   kind='data')
         return np.ascontiguousarray(data).reshape(-1)
     if isinstance(data, (list, tuple)):
         try:
             return np.frombuffer(bytes(data), dtype=np.uint8)
         except (TypeError, ValueError) as err:
             raise ImageDecodeError(
-                f'image data must be a sequence of ints in [0, 255]: {err}') from err
+                f'image data must be a sequence of ints in [0, 255]: {err}', kind='data') from err
     if not isinstance(data, (bytes, bytearray, memoryview, py_array)):
         raise ImageDecodeError(
             f'image data must be bytes, array.array or a uint8 numpy array, '
-            f'got {type(data).__name__}')
+            f'got {type(data).__name__}', kind='data')
     view = memoryview(data)
     if view.itemsize != 1:
         raise ImageDecodeError(
             f'image data must be bytes, got items of {view.itemsize} bytes '
-            f'(format {view.format!r})')
+            f'(format {view.format!r})', kind='data')
     return np.frombuffer(view.cast('B') if view.ndim != 1 else view, dtype=np.uint8)
 
 
@@ -137,7 +138,7 @@ def _encoding_layout(encoding: Any) -> _EncodingLayout:
     except KeyError:
         raise ImageDecodeError(
             f'unsupported encoding {encoding!r}; supported encodings are '
-            f'{", ".join(SUPPORTED_ENCODINGS)}') from None
+            f'{", ".join(SUPPORTED_ENCODINGS)}', kind='encoding') from None
 
 
 def image_to_array(msg: Any) -> tuple[np.ndarray, str]:
@@ -166,19 +167,21 @@ def image_to_array(msg: Any) -> tuple[np.ndarray, str]:
     step = _integer_field(msg, 'step')
     is_bigendian = _integer_field(msg, 'is_bigendian', allow_bool=True)
     if height == 0 or width == 0:
-        raise ImageDecodeError(f'image has zero width or height ({width}x{height})')
+        raise ImageDecodeError(f'image has zero width or height ({width}x{height})',
+                               kind='zero_size')
     bytes_per_pixel = layout.channels * layout.bytes_per_channel
     if step < width * bytes_per_pixel:
         raise ImageDecodeError(
             f'step {step} is smaller than width * bytes_per_pixel = {width} * '
-            f'{bytes_per_pixel} = {width * bytes_per_pixel}')
+            f'{bytes_per_pixel} = {width * bytes_per_pixel}', kind='step')
     try:
         data = _data_bytes(msg.data)
     except AttributeError as err:
         raise ImageDecodeError("image message has no 'data' field") from err
     if data.size != height * step:
         raise ImageDecodeError(
-            f'data length {data.size} != height * step = {height} * {step} = {height * step}')
+            f'data length {data.size} != height * step = {height} * {step} = {height * step}',
+            kind='data_length')
 
     if layout.bytes_per_channel == 2:
         dtype = np.dtype('>u2' if is_bigendian else '<u2')
@@ -245,22 +248,24 @@ def compressed_to_gray(msg: Any) -> np.ndarray:
             f"compressed image field 'format' must be a string, got {type(fmt).__name__}")
     lowered = fmt.lower()
     if 'compresseddepth' in lowered:
-        raise ImageDecodeError(f'unsupported compressed format {fmt!r}: compressedDepth')
+        raise ImageDecodeError(f'unsupported compressed format {fmt!r}: compressedDepth',
+                               kind='encoding')
     if not any(name in lowered for name in ('jpeg', 'jpg', 'png')):
         raise ImageDecodeError(
             f'unsupported compressed format {fmt!r}; supported compressions are '
-            f'{", ".join(SUPPORTED_COMPRESSED_FORMATS)}')
+            f'{", ".join(SUPPORTED_COMPRESSED_FORMATS)}', kind='encoding')
     try:
         data = _data_bytes(msg.data)
     except AttributeError as err:
         raise ImageDecodeError("compressed image message has no 'data' field") from err
     if data.size == 0:
-        raise ImageDecodeError(f'compressed image data is empty (format {fmt!r})')
+        raise ImageDecodeError(f'compressed image data is empty (format {fmt!r})',
+                               kind='compressed')
     gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
     if gray is None or gray.size == 0:
         raise ImageDecodeError(
             f'OpenCV could not decode {data.size} bytes of compressed image data '
-            f'(format {fmt!r})')
+            f'(format {fmt!r})', kind='compressed')
     if gray.dtype != np.uint8:  # IMREAD_GRAYSCALE gives 8 bits; keep the contract anyway.
         gray = (gray.astype(np.uint16) >> 8).astype(np.uint8)
     return np.ascontiguousarray(gray)

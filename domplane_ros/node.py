@@ -19,6 +19,8 @@ from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETER
                                  PlaneNodeConfig)
 from domplane_ros.diagnostics import plane_status, STATUS_NAME
 from domplane_ros.errors import ImageDecodeError
+from domplane_ros.health import (homography_problem, new_counts, problem_key, StampChecks,
+                                 Throttle)
 from domplane_ros.image import message_to_gray
 from domplane_ros.mask import overlay
 from domplane_ros.pipeline import FrameResult, PlanePipeline
@@ -60,15 +62,22 @@ class PlaneNode(Node):
         self._values = self._declare_parameters()
         self.config = PlaneNodeConfig.from_flat(self._values)
         # Guards the pipeline and config changes. Image callbacks never take it (the worker
-        # holds it while processing): they use the synchroniser, which has its own lock.
+        # holds it while processing); they take _input_lock (stamp checks, synchroniser).
         self._lock = threading.Lock()
+        self._input_lock = threading.Lock()
         self._cv = threading.Condition()       # guards the hand-over slot
         self._pending: Pair | None = None
         self._stop = False
         self.pipeline = PlanePipeline(self.config)
         self._sync = ApproximateTimeSync(self.config.sync.slop_s, self.config.sync.queue_size)
         self._counters = {'pairs': 0, 'processed': 0, 'dropped_busy': 0, 'decode_errors': 0,
-                          'consecutive_failures': 0}
+                          'consecutive_failures': 0, 'internal_errors': 0}
+        # Input problems (see domplane_ros.health): per-message stamp checks, decode errors by
+        # kind, one throttle clock per kind of problem, the last warning for diagnostics.
+        self._stamp_checks = StampChecks(self._sync.slop_ns)
+        self._decode_counts = new_counts()
+        self._throttle = Throttle(_THROTTLE_S)
+        self._input_warning = ''
         self._latency_ms: deque[float] = deque(maxlen=200)
         self._last_result: FrameResult | None = None
         self._last_error = ''
@@ -119,6 +128,10 @@ class PlaneNode(Node):
                 param = self.declare_parameter(spec.name, default, descriptor(spec))
             except (InvalidParameterTypeException, InvalidParameterValueException,
                     ParameterException) as err:
+                # Our validator's message is shorter and says which bound was crossed.
+                override = (getattr(self, '_parameter_overrides', None) or {}).get(spec.name)
+                if override is not None:
+                    check_value(spec, _plain(override.value))
                 raise ConfigError(f'parameter {spec.name!r}: {err}') from err
             value = param.value
             if value is None:
@@ -154,9 +167,10 @@ class PlaneNode(Node):
             config = PlaneNodeConfig.from_flat(trial)
         except ConfigError as err:
             return SetParametersResult(successful=False, reason=str(err))
-        with self._lock:
+        with self._lock, self._input_lock:
             if config.sync != self.config.sync:
                 self._sync = ApproximateTimeSync(config.sync.slop_s, config.sync.queue_size)
+                self._stamp_checks.slop_ns = self._sync.slop_ns
             self.pipeline.update_config(config)
             self.config = config
             self._values = trial
@@ -174,6 +188,11 @@ class PlaneNode(Node):
             f'({wanted}; policy id {getattr(info, "last_policy_kind", "?")}); no images will '
             'arrive from it. Set qos.reliable to match the camera driver.')
 
+    def _warn_input(self, message: str, key: str | None = None) -> None:
+        """Log an input problem, throttled per kind of problem (``key``, or the message's)."""
+        if self._throttle.due(key or problem_key(message), time.monotonic()):
+            self.get_logger().warning(message)
+
     def _on_image(self, side: str, msg: Image) -> None:
         now = time.monotonic()
         last, self._last_image[side] = self._last_image[side], now
@@ -181,7 +200,13 @@ class PlaneNode(Node):
         if last is not None and now - last > self.config.transport.silence_s:
             self.get_logger().info(f'images on {self._topics[side]} again after '
                                    f'{now - last:.1f} s')
-        pairs = self._sync.add(side, _stamp_ns(msg), msg)
+        stamp_ns = _stamp_ns(msg)
+        with self._input_lock:
+            warnings = self._stamp_checks.observe(side, stamp_ns)
+            pairs = self._sync.add(side, stamp_ns, msg)
+        for warning in warnings:
+            self._input_warning = warning
+            self._warn_input(warning)
         for pair in pairs:
             with self._cv:
                 if self._pending is not None:
@@ -203,6 +228,7 @@ class PlaneNode(Node):
             try:
                 self._process(pair)
             except Exception as err:  # noqa: B902 - the worker must survive any one frame
+                self._counters['internal_errors'] += 1
                 self._last_error = f'{type(err).__name__}: {err}'
                 self.get_logger().error(f'frame failed: {self._last_error}',
                                         throttle_duration_sec=_THROTTLE_S)
@@ -214,20 +240,27 @@ class PlaneNode(Node):
             right = message_to_gray(pair.right)
         except ImageDecodeError as err:
             self._counters['decode_errors'] += 1
+            self._counters['consecutive_failures'] += 1
+            self._decode_counts['decode_' + err.kind] += 1
             self._last_error = f'image rejected: {err}'
-            self.get_logger().error(self._last_error, throttle_duration_sec=_THROTTLE_S)
+            self._last_result = None
+            if self._throttle.due('decode ' + err.kind, time.monotonic()):
+                self.get_logger().error(self._last_error)
             return
         with self._lock:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,
                                            reset=pair.after_reset)
+        for warning in result.warnings:
+            self._input_warning = warning
+            self._warn_input(warning)
         header = pair.left.header
-        if result.ok:
+        if result.ok and not homography_problem(result.homography):
             self._pub_h.publish(homography_msg(result.homography))
             self._counters['consecutive_failures'] = 0
         else:
             self._counters['consecutive_failures'] += 1
-            self.get_logger().warning(f'no plane: {result.reason}',
-                                      throttle_duration_sec=_THROTTLE_S)
+            self._warn_input(f'no plane: {result.reason}',
+                             key='no plane ' + problem_key(result.reason))
         self._pub_mask.publish(image_msg(result.mask, header, 'mono8'))
         if self._pub_debug.get_subscription_count() > 0:
             inl = result.estimate.inliers if result.ok else None
@@ -262,8 +295,12 @@ class PlaneNode(Node):
             decode_errors=self._counters['decode_errors'], lock_state=self.pipeline.state,
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=self._counters['consecutive_failures'],
-            last_result=self._last_result, last_error=self._last_error, cameras=cameras,
+            last_result=self._last_result, last_error=self._last_error,
+            input_counts=(self.pipeline.checks.counts, self._stamp_checks.counts,
+                          self._decode_counts),
+            input_warning=self._input_warning, cameras=cameras,
             silence_s=self.config.transport.silence_s)
+        self._input_warning = ''
         if message.startswith('no images on '):
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in cameras)

@@ -12,7 +12,8 @@ import time
 
 from domplane_ros.config import PlaneNodeConfig, PriorConfig
 from domplane_ros.estimator import estimate_plane, FailedEstimate, PlaneEstimate
-from domplane_ros.features import detect_corners
+from domplane_ros.features import detect_corners, roi_to_pixels
+from domplane_ros.health import homography_problem, inlier_spread, PairChecks, texture_note
 from domplane_ros.homography import apply_homography
 from domplane_ros.image import check_gray
 from domplane_ros.mask import plane_mask
@@ -45,6 +46,8 @@ class FrameResult:
         reason: Why the frame failed ('' when ok).
         state: Lock state after this frame: ``'locked'`` or ``'searching'``.
         timings_ms: Milliseconds spent in ``features``, ``estimate``, ``mask`` and ``total``.
+        warnings: Input problems that did not refuse the pair (a stamp jump, a size change),
+            each a one-line message (see :mod:`domplane_ros.health`).
 
     """
 
@@ -59,6 +62,7 @@ class FrameResult:
     reason: str
     state: str
     timings_ms: dict[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
 
     @property
     def n_inliers(self) -> int:
@@ -91,8 +95,8 @@ class PlanePipeline:
         self.stats = PipelineStats()
         self._last_h: np.ndarray | None = None
         self._last_energy_per_point: float | None = None
-        self._last_stamp_ns: int | None = None
-        self._last_shape: tuple[tuple[int, int], tuple[int, int]] | None = None
+        self.checks = PairChecks(self.config.pipeline.max_clipped_fraction,
+                                 self.config.pipeline.max_stamp_jump_s)
         self._bounds_cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
 
     @property
@@ -115,6 +119,8 @@ class PlanePipeline:
             self.reset()
             self._bounds_cache.clear()
         self.config = config
+        self.checks.max_clipped_fraction = config.pipeline.max_clipped_fraction
+        self.checks.max_stamp_jump_s = config.pipeline.max_stamp_jump_s
 
     def reset(self) -> None:
         """Drop the warm start: the next frame re-initialises from the prior."""
@@ -131,12 +137,16 @@ class PlanePipeline:
             left: (H, W) uint8 left grey image.
             right: (H', W') uint8 right grey image.
             stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one (clock
-                reset, bag loop) or more than ``pipeline.max_gap_s`` newer (camera drop-out)
-                drops the warm start.
+                reset, bag loop) or more than ``pipeline.max_stamp_jump_s`` newer drops the
+                warm start.
             reset: Drop the warm start before this frame.
 
         Returns:
-            The :class:`FrameResult`; it is never a non-finite homography.
+            The :class:`FrameResult`; it is never a non-finite homography. Pairs that
+            :class:`~domplane_ros.health.PairChecks` refuses (sizes differ, a frozen camera,
+            a black or saturated frame), too few features, inliers with too little spread
+            (``pipeline.min_inlier_spread``) and homographies outside the prior are failures
+            with the reason, a mask of zeros and no homography.
 
         Raises:
             ValueError: If an image is not a 2-D uint8 array.
@@ -145,16 +155,13 @@ class PlanePipeline:
         t0 = time.perf_counter()
         check_gray(left, 'left')
         check_gray(right, 'right')
-        shapes = (left.shape, right.shape)
-        last = self._last_stamp_ns
-        gap_ns = self.config.pipeline.max_gap_s * 1e9
-        if (reset or (last is not None and not 0 <= stamp_ns - last <= gap_ns)
-                or (self._last_shape is not None and shapes != self._last_shape)):
+        check = self.checks.check(left, right, stamp_ns)
+        if reset or check.reset:
             self.reset()
-        self._last_stamp_ns = stamp_ns
-        self._last_shape = shapes
         self.stats.frames += 1
         cfg = self.config
+        if check.refused:
+            return self._refused(left, stamp_ns, check.refused, check.warnings, t0)
         left_pts = detect_corners(left, cfg.features)
         right_pts = detect_corners(right, cfg.features)
         t1 = time.perf_counter()
@@ -178,6 +185,13 @@ class PlanePipeline:
         if estimate.ok:
             reason = self._suspicious(estimate, left_pts.shape[0], (width, height),
                                       energy=False)
+            if reason:
+                self.checks.counts['outside_prior'] += 1
+            else:
+                reason = self._input_problem(estimate, left_pts, (width, height))
+        elif left_pts.shape[0] < cfg.estimator.min_inliers or right_pts.shape[0] < 4:
+            self.checks.counts['too_few_features'] += 1
+            reason += (f' (left {texture_note(left)}; right {texture_note(right)})')
         t2 = time.perf_counter()
         if estimate.ok and not reason:
             h = estimate.homography
@@ -199,7 +213,41 @@ class PlanePipeline:
         return FrameResult(stamp_ns=stamp_ns, ok=ok, homography=h, mask=mask,
                            estimate=estimate, left_points=left_pts, right_points=right_pts,
                            reinitialised=reinit, reason='' if ok else reason,
-                           state=self.state, timings_ms=timings)
+                           state=self.state, timings_ms=timings, warnings=check.warnings)
+
+    def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
+                 warnings: tuple[str, ...], t0: float) -> FrameResult:
+        """Return the failed frame of a refused pair; the warm start is dropped."""
+        self._last_h = None
+        self._last_energy_per_point = None
+        self.stats.failed += 1
+        empty = np.zeros((0, 2), np.float64)
+        total_ms = 1e3 * (time.perf_counter() - t0)
+        return FrameResult(stamp_ns=stamp_ns, ok=False, homography=None,
+                           mask=np.zeros(left.shape, np.uint8), estimate=FailedEstimate(reason),
+                           left_points=empty, right_points=empty, reinitialised=False,
+                           reason=reason, state=self.state,
+                           timings_ms={'features': 0.0, 'estimate': 0.0, 'mask': 0.0,
+                                       'total': total_ms},
+                           warnings=warnings)
+
+    def _input_problem(self, estimate: PlaneEstimate, left_pts: np.ndarray,
+                       size: tuple[int, int]) -> str:
+        """Return why a converged estimate must not be published ('' if it may be)."""
+        problem = homography_problem(estimate.homography)
+        if problem:
+            self.checks.counts['invalid_homography'] += 1
+            return problem
+        min_spread = self.config.pipeline.min_inlier_spread
+        if min_spread > 0:
+            x0, y0, x1, y1 = roi_to_pixels(self.config.features.roi, *size)
+            spread = inlier_spread(left_pts[estimate.inliers], float((x1 - x0) * (y1 - y0)))
+            if spread < min_spread:
+                self.checks.counts['degenerate_geometry'] += 1
+                return (f'degenerate geometry: the inliers span {100 * spread:.2f} % of the '
+                        f'region of interest (< pipeline.min_inlier_spread {min_spread:g}); '
+                        'collinear or packed in one patch, they do not constrain the plane')
+        return ''
 
     def _estimate(self, left_pts: np.ndarray, right_pts: np.ndarray,
                   size: tuple[int, int]) -> PlaneEstimate | FailedEstimate:

@@ -53,6 +53,7 @@ from typing import Any, Callable, Iterable, Iterator, NamedTuple, TextIO
 from domplane_ros.config import load_params_file, PlaneNodeConfig
 from domplane_ros.diagnostics import plane_status, STATUS_NAME
 from domplane_ros.errors import BagError, ConfigError, ImageDecodeError
+from domplane_ros.health import INPUT_COUNTER_NAMES, new_counts, StampChecks
 from domplane_ros.image import gray_to_image_fields, message_to_gray
 from domplane_ros.pipeline import FrameResult, PlanePipeline
 from domplane_ros.sync import ApproximateTimeSync, Pair, Side
@@ -248,6 +249,10 @@ class ReplaySession:
         self.latencies_ms: list[float] = []
         self.last_result: FrameResult | None = None
         self.last_error = ''
+        # Input problems, as the node counts them (see domplane_ros.health).
+        self.stamp_checks = StampChecks(self.sync.slop_ns)
+        self.decode_counts = new_counts()
+        self.input_warning = ''
 
     def add(self, side: Side, msg: Any) -> list[ReplayedFrame]:
         """Add one image message and process the pairs it completes.
@@ -267,6 +272,8 @@ class ReplaySession:
         self._last_stamp_ns[side] = stamp_ns
         if self._first_ns is None:
             self._first_ns = stamp_ns
+        for warning in self.stamp_checks.observe(side, stamp_ns):
+            self.input_warning = warning
         for pair in self.sync.add(side, stamp_ns, msg):
             self.counters.pairs += 1
             frame = self.process(pair)
@@ -289,8 +296,13 @@ class ReplaySession:
             left, result = process_pair(self.pipeline, pair)
         except ImageDecodeError as err:
             self.counters.decode_errors += 1
+            self.counters.consecutive_failures += 1
+            self.decode_counts['decode_' + err.kind] += 1
             self.last_error = f'image rejected: {err}'
+            self.last_result = None
             return None
+        if result.warnings:
+            self.input_warning = result.warnings[-1]
         latency_ms = 1e3 * (time.perf_counter() - t0)
         counters = self.counters
         counters.processed += 1
@@ -337,6 +349,7 @@ class ReplaySession:
                             new / span_s if span_s > 0 else rate, max(now - since, 0) * 1e-9))
             self._received_mark[side] = self._received[side]
         self._diag_ns = now
+        warning, self.input_warning = self.input_warning, ''
         return plane_status(
             rate=rate, latencies_ms=self.latencies_ms[-_LATENCY_WINDOW:], pairs=counters.pairs,
             processed=counters.processed, dropped_busy=0,
@@ -345,8 +358,16 @@ class ReplaySession:
             lock_state=self.pipeline.state,
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=counters.consecutive_failures, last_result=self.last_result,
-            last_error=self.last_error, cameras=cameras,
+            last_error=self.last_error,
+            input_counts=(self.pipeline.checks.counts, self.stamp_checks.counts,
+                          self.decode_counts),
+            input_warning=warning, cameras=cameras,
             silence_s=self.config.transport.silence_s)
+
+    def input_counts(self) -> dict[str, int]:
+        """Return the input problems seen so far (names of ``health.INPUT_COUNTER_NAMES``)."""
+        return {name: (self.pipeline.checks.counts[name] + self.stamp_checks.counts[name]
+                       + self.decode_counts[name]) for name in INPUT_COUNTER_NAMES}
 
 
 # --------------------------------------------------------------------------------------------
@@ -690,6 +711,7 @@ class ReplaySummary:
         wall_s: Wall time of the run, seconds.
         written: Messages written per output topic.
         first_errors: The first few decode errors, for the report.
+        input_problems: Input problems seen, by diagnostics key (only the non-zero ones).
 
     """
 
@@ -711,6 +733,7 @@ class ReplaySummary:
     wall_s: float = 0.0
     written: dict[str, int] = field(default_factory=dict)
     first_errors: list[str] = field(default_factory=list)
+    input_problems: dict[str, int] = field(default_factory=dict)
 
     @property
     def rate_pairs_per_s(self) -> float:
@@ -743,6 +766,9 @@ class ReplaySummary:
             '  written:         ' + ', '.join(f'{topic} {count}'
                                               for topic, count in self.written.items()),
         ]
+        if self.input_problems:
+            out.append('  input problems:  ' + ', '.join(
+                f'{key} {count}' for key, count in self.input_problems.items()))
         out += [f'  error: {text}' for text in self.first_errors]
         return out
 
@@ -938,6 +964,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     summary.undecodable_messages = counters.undecodable_messages
     summary.reinitialisations = session.pipeline.stats.reinitialisations
     summary.latency_ms = list(session.latencies_ms)
+    summary.input_problems = {INPUT_COUNTER_NAMES[name]: count
+                              for name, count in session.input_counts().items() if count}
     summary.wall_s = time.perf_counter() - t_start
     summary.written = dict(output.counts)
     if counters.decode_errors or counters.undecodable_messages:

@@ -136,7 +136,7 @@ def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
     gap_s = 1.5
     rig = Rig(ros_context, _prior(scene, Parameter('diagnostics.period_s', value=0.2),
                                   Parameter('diagnostics.silence_s', value=0.5),
-                                  Parameter('pipeline.max_gap_s', value=1.0)))
+                                  Parameter('pipeline.max_stamp_jump_s', value=1.0)))
     processed_pairs = []
     real_process = rig.node._process
 
@@ -183,7 +183,7 @@ def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
         for left_ns, right_ns in after:
             assert left_ns >= stamp_back_ns - 50_000_000
             assert abs(left_ns - right_ns) <= 10_000_000
-        # The gap (> pipeline.max_gap_s) dropped the warm start; the plane was found again.
+        # The gap (> pipeline.max_stamp_jump_s) dropped the warm start; the plane was found again.
         assert rig.node.pipeline.stats.resets == resets_before + 1
         assert _transfer_error_px(rig.homographies[-1][1].reshape(3, 3), scene) < 1.0
     finally:
