@@ -287,6 +287,8 @@ def _report_dropout(args, frames, diagnostics, homographies, h_times) -> None:
                   if before else 'n/a')
         print(f'  status OK again {float(ok_after[0]["_t"]) - t_back:.2f} s after the return: '
               f'"{ok_after[0]["_message"]}"; re-initialisations across the gap: {reinit}')
+    after = [d['_message'] for d in diagnostics if float(d['_t']) > t_back][:3]
+    print('  statuses after the return: ' + ' | '.join(after))
     if h_after:
         err = _transfer_error_px(h_after[0][1].reshape(3, 3), frames[0])
         print(f'  first homography {h_after[0][0] - t_back:.2f} s after the return, transfer '
