@@ -18,7 +18,7 @@ from typing import Any, Mapping
 from domplane_ros.errors import ConfigError
 
 POTENTIAL_NAMES = ('least_squares', 'truncated_quadratic', 'huber', 'geman_mcclure')
-FEATURE_KINDS = ('points',)
+FEATURE_KINDS = ('points', 'lines', 'both')
 
 
 @dataclass(frozen=True)
@@ -58,6 +58,16 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('features.roi', [0.0, 0.0, 1.0, 1.0], 'floats',
               'Region of interest in the left image as fractions [x0, y0, x1, y1] '
               '(0..1, x0 < x1, y0 < y1).', 0.0, 1.0, lengths=(4,)),
+    ParamSpec('features.kind', 'points', 'str',
+              'Features the plane is estimated from: points (corners), lines (straight line '
+              'segments) or both.', choices=FEATURE_KINDS),
+    ParamSpec('features.max_lines', 150, 'int',
+              'Maximum number of line segments detected per image (lines and both).', 4, 2000),
+    ParamSpec('features.min_line_length_px', 25.0, 'float',
+              'Line segments shorter than this are dropped, in pixels.', 4.0, 1000.0),
+    ParamSpec('features.line_scale', 0.8, 'float',
+              'Image scale at which the line segment detector runs (LSD scale; smaller is '
+              'faster and less precise).', 0.2, 1.0),
     # Estimator.
     ParamSpec('estimator.potential', 'truncated_quadratic', 'str',
               'Robust potential: least_squares, truncated_quadratic, huber or '
@@ -68,6 +78,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('estimator.threshold_px', 3.0, 'float',
               'Robust threshold (truncation, Huber corner, Geman-McClure scale) in pixels; '
               'points farther than this from every partner are off the plane.', 0.1, 200.0),
+    ParamSpec('estimator.line_weight', 3.0, 'float',
+              'Weight of a line segment relative to a point in the joint energy (features.kind '
+              'both).', 0.01, 100.0),
     ParamSpec('estimator.gnc_start_px', 24.0, 'float',
               'Geman-McClure only: initial (wide) scale of graduated non-convexity, pixels.',
               0.1, 500.0),
@@ -261,7 +274,7 @@ def flatten_params(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any
 
 @dataclass(frozen=True)
 class FeatureConfig:
-    """Corner detection settings (see ``features.*`` in :data:`PARAMETERS`)."""
+    """Corner and line detection settings (see ``features.*`` in :data:`PARAMETERS`)."""
 
     max_points: int = 400
     quality_level: float = 0.01
@@ -270,6 +283,10 @@ class FeatureConfig:
     grid_rows: int = 4
     grid_cols: int = 4
     roi: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
+    kind: str = 'points'
+    max_lines: int = 150
+    min_line_length_px: float = 25.0
+    line_scale: float = 0.8
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""
@@ -286,6 +303,7 @@ class EstimatorConfig:
     potential: str = 'truncated_quadratic'
     lambda_weight: float = 0.8
     threshold_px: float = 3.0
+    line_weight: float = 3.0
     gnc_start_px: float = 24.0
     gnc_factor: float = 0.5
     max_iterations: int = 60

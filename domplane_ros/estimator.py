@@ -17,6 +17,15 @@ point if that is cheaper under the new ``H``. With graduated non-convexity the e
 with the scale, so monotonicity holds within each stage (``stage_trace`` says which).
 
 After convergence, a Euclidean refinement fits ``H`` to the inliers' closest points.
+
+Line segments (:mod:`domplane_ros.lines`) enter the same iteration: a left segment's two
+endpoints are predicted by ``H``, its closest right line is the one nearest in the pixel
+distance ``D = sqrt(d(x1)^2 + d(x2)^2)`` of the predicted endpoints to that (infinite) line,
+and its auxiliary variables are two points, the predicted endpoints moved toward their
+projections onto that line by the potential's rule (``s = step(D)``). The global step is the
+same weighted least-squares fit from left points and endpoints to their auxiliary points. With
+points and lines together the energy is ``sum over points + line_weight * sum over segments``,
+and every step lowers it, so the same monotonicity holds.
 """
 
 from __future__ import annotations
@@ -28,6 +37,8 @@ from domplane_ros.config import EstimatorConfig, PriorConfig
 from domplane_ros.homography import (apply_homography, as_homography, as_points,
                                      check_homography, count_distinct, FailedEstimation,
                                      normalise_scale, NormalisedRefiner)
+from domplane_ros.lines import (as_segments, endpoints, LineMatcher, lines_reason,
+                                screen_line_candidates, segment_lengths)
 from domplane_ros.potentials import make_potential, Potential
 from domplane_ros.prior import prior_candidates, screen_candidates
 import numpy as np
@@ -36,6 +47,8 @@ from scipy.spatial import cKDTree
 _GLOBAL_STEP_ITERATIONS = 2
 _POLISH_ROUNDS = 2
 _POLISH_STEPS = 2
+_LINE_POLISH_ROUNDS = 12
+_LINE_POLISH_TOLERANCE_PX = 1e-3
 OVER_RELAXATION = 0.5
 
 
@@ -55,6 +68,12 @@ class PlaneEstimate:
         final_energy: Last value of the energy trace.
         potential: Name of the potential used.
         candidates_tried: Prior candidates that got the full iteration (0 for a warm start).
+        line_inliers: (K,) bool, left segments on the plane (a right line within the
+            threshold); empty without lines.
+        line_matches: (K,) int64, index of each left segment's closest right segment.
+        line_residuals_px: (K,) float64 final distance of each predicted segment to its
+            closest right line (:mod:`domplane_ros.lines`).
+        left_lines: (K, 4) float64 the left segments used (zero-length ones dropped).
 
     """
 
@@ -69,13 +88,17 @@ class PlaneEstimate:
     final_energy: float
     potential: str
     candidates_tried: int = 0
+    line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    line_matches: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    line_residuals_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
     ok: bool = field(default=True, init=False)
     reason: str = field(default='', init=False)
 
     @property
     def n_inliers(self) -> int:
-        """Return the number of inlier left points."""
-        return int(np.count_nonzero(self.inliers))
+        """Return the number of inlier left features (points plus segments)."""
+        return int(np.count_nonzero(self.inliers)) + int(np.count_nonzero(self.line_inliers))
 
     def __bool__(self) -> bool:
         """Return True: this is a success."""
@@ -120,52 +143,113 @@ def gnc_scales(options: EstimatorConfig) -> list[float]:
 
 
 class _TwoStep:
-    """State of one run: left points, the right tree, and the normalised refiner."""
+    """State of one run: the features, the right search structures and the refiner.
 
-    def __init__(self, left: np.ndarray, right: np.ndarray, tree: cKDTree) -> None:
+    The global step works on *rows*: one row per left point and two per left segment (its
+    endpoints). A feature's share of the energy is the weighted sum over its rows, so points
+    and lines enter one joint energy ``sum_f w_f (1/2 ||H(p_f) - a_f||^2 + P(d(a_f)))`` with
+    ``w = 1`` for points and ``line_weight`` for segments (``||.||`` over the feature's rows).
+    """
+
+    def __init__(self, left: np.ndarray, right: np.ndarray, tree: cKDTree | None,
+                 left_segments: np.ndarray | None = None,
+                 matcher: LineMatcher | None = None, line_weight: float = 1.0) -> None:
         self.left = left
         self.right = right
         self.tree = tree
-        self.refiner = NormalisedRefiner(left, right)
+        self.n_points = left.shape[0]
+        self.matcher = matcher
+        self.left_segments = (left_segments if left_segments is not None and matcher is not None
+                              else np.zeros((0, 4)))
+        self.n_lines = self.left_segments.shape[0]
+        self.line_weight = float(line_weight)
+        self.src = np.concatenate([left, endpoints(self.left_segments)])
+        frame = [right] + ([endpoints(matcher.segments)] if matcher is not None else [])
+        self.refiner = NormalisedRefiner(self.src, np.concatenate(frame))
+        self.row_feature = np.concatenate([np.arange(self.n_points), np.repeat(
+            np.arange(self.n_points, self.n_points + self.n_lines), 2)])
+        self.feature_weight = np.concatenate([np.ones(self.n_points),
+                                              np.full(self.n_lines, self.line_weight)])
+        self.row_weight = (None if self.n_lines == 0 or self.line_weight == 1.0
+                           else self.feature_weight[self.row_feature])
+
+    @property
+    def n_features(self) -> int:
+        """Return the number of features (points plus segments)."""
+        return self.n_points + self.n_lines
+
+    def apply(self, h: np.ndarray) -> np.ndarray:
+        """Return the (rows, 2) predictions of every row under ``h``."""
+        return apply_homography(h, self.src)
+
+    def match(self, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return per-feature closest distances and indices, and per-row closest positions.
+
+        The closest position of a point row is its closest right point, of a segment's
+        endpoint row its projection onto the segment's closest right line.
+        """
+        n = self.n_points
+        r = np.zeros(self.n_features)
+        idx = np.zeros(self.n_features, np.int64)
+        closest = np.empty_like(pred)
+        if n:
+            r[:n], idx[:n] = self.tree.query(pred[:n])
+            closest[:n] = self.right[idx[:n]]
+        if self.n_lines:
+            d, li, c1, c2 = self.matcher.closest(pred[n::2], pred[n + 1::2])
+            r[n:], idx[n:] = d, li
+            closest[n::2] = c1
+            closest[n + 1::2] = c2
+        return r, idx, closest
 
     def local_step(self, pred: np.ndarray, potential: Potential
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Return closest distances, match indices, aux points, and their energy terms."""
-        r, idx = self.tree.query(pred)
-        closest = self.right[idx]
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                              np.ndarray]:
+        """Return closest distances, indices, aux rows, penalties, weighted terms, closest rows.
+
+        Distances, indices, penalties and terms are per feature; aux and closest per row.
+        """
+        r, idx, closest = self.match(pred)
         s = potential.step(r)
         frac = np.divide(s, r, out=np.zeros_like(r), where=r > 0)
-        aux = pred + (closest - pred) * frac[:, None]
+        aux = pred + (closest - pred) * frac[self.row_feature, None]
         penalty = potential.penalty(r - s)
-        return r, idx, aux, penalty, 0.5 * s * s + penalty
+        terms = self.feature_weight * (0.5 * s * s + penalty)
+        return r, idx, aux, penalty, terms, closest
 
     def run_stage(self, h: np.ndarray, potential: Potential, options: EstimatorConfig,
                   energies: list[float]) -> tuple[np.ndarray, int, bool, tuple]:
         """Iterate one stage from ``h``; append energies.
 
         Returns:
-            ``(H, iterations, converged, (pred, r, idx))`` with the predictions of the final
-            ``H`` and their closest-point distances and indices.
+            ``(H, iterations, converged, (pred, r, idx, closest))`` with the predictions of
+            the final ``H``, their closest distances and indices, and closest positions.
 
         """
-        pred = apply_homography(h, self.left)
-        r, idx, aux, penalty, terms = self.local_step(pred, potential)
+        pred = self.apply(h)
+        r, idx, aux, penalty, terms, closest = self.local_step(pred, potential)
         energy = float(np.sum(terms))
         energies.append(energy)
+        weights = self.row_weight
         for it in range(1, options.max_iterations + 1):
-            h_new, e_before, _ = self.refiner.refine(h, aux, None, _GLOBAL_STEP_ITERATIONS)
+            h_new, e_before, _ = self.refiner.refine(h, aux, weights, _GLOBAL_STEP_ITERATIONS)
             if OVER_RELAXATION > 0:
-                ext = self.refiner.extrapolate(h, h_new, aux, OVER_RELAXATION, e_before)
+                ext = self.refiner.extrapolate(h, h_new, aux, OVER_RELAXATION, e_before,
+                                               weights)
                 if ext is not None:
                     h_new = ext[0]
-            pred_new = apply_homography(h_new, self.left)
-            r, idx, aux_new, pen_new, terms_new = self.local_step(pred_new, potential)
-            # Step check: keep a previous auxiliary point where it is cheaper under the new H.
+            pred_new = self.apply(h_new)
+            r, idx, aux_new, pen_new, terms_new, closest = self.local_step(pred_new, potential)
+            # Step check: keep a previous auxiliary variable where it is cheaper under the
+            # new H (per feature: a segment keeps both auxiliary endpoints or neither).
             diff = pred_new - aux
-            old_terms = 0.5 * np.einsum('ij,ij->i', diff, diff) + penalty
+            sq = np.bincount(self.row_feature, weights=np.einsum('ij,ij->i', diff, diff),
+                             minlength=self.n_features)
+            old_terms = self.feature_weight * (0.5 * sq + penalty)
             keep_old = old_terms < terms_new
             if np.any(keep_old):
-                aux_new[keep_old] = aux[keep_old]
+                keep_rows = keep_old[self.row_feature]
+                aux_new[keep_rows] = aux[keep_rows]
                 pen_new[keep_old] = penalty[keep_old]
                 terms_new = np.where(keep_old, old_terms, terms_new)
             energy_new = float(np.sum(terms_new))
@@ -175,57 +259,111 @@ class _TwoStep:
             h, pred, aux, penalty, energy = h_new, pred_new, aux_new, pen_new, energy_new
             if move < options.tolerance_px or decrease <= options.energy_tolerance * max(
                     energy, 1e-300):
-                return h, it, True, (pred, r, idx)
-        return h, options.max_iterations, False, (pred, r, idx)
+                return h, it, True, (pred, r, idx, closest)
+        return h, options.max_iterations, False, (pred, r, idx, closest)
 
     def polish(self, h: np.ndarray, threshold_px: float, matched: tuple
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Euclidean refinement: fit H to the inliers' closest points, re-match, repeat.
+        """Euclidean refinement: fit H to the inliers' closest positions, re-match, repeat.
+
+        For segments the closest positions are the endpoints' projections onto the matched
+        lines, so this minimises the point-to-line distances of the inlier segments.
 
         Args:
             h: (3, 3) float64 converged homography.
             threshold_px: Inlier threshold.
-            matched: ``(pred, r, idx)`` of ``h`` from the last local step.
+            matched: ``(pred, r, idx, closest)`` of ``h`` from the last local step.
 
         Returns:
-            The refined H, and the closest distances and indices of its predictions.
+            The refined H, and the per-feature closest distances and indices of its
+            predictions.
 
         """
-        pred, r, idx = matched
-        for _ in range(_POLISH_ROUNDS):
+        pred, r, idx, closest = matched
+        # With segments the targets (projections onto the matched lines) move with H, so the
+        # refit is repeated until the predictions settle, not only until the matches do.
+        rounds = _POLISH_ROUNDS if self.n_lines == 0 else _LINE_POLISH_ROUNDS
+        for _ in range(rounds):
             inl = r < threshold_px
             if np.count_nonzero(inl) < 8:
                 break
-            target = np.where(inl[:, None], self.right[idx], pred)
-            h_new, _, _ = self.refiner.refine(h, target, inl.astype(np.float64),
-                                              _POLISH_STEPS)
+            inl_rows = inl[self.row_feature]
+            target = np.where(inl_rows[:, None], closest, pred)
+            weights = inl_rows.astype(np.float64)
+            if self.row_weight is not None:
+                weights = weights * self.row_weight
+            h_new, _, _ = self.refiner.refine(h, target, weights, _POLISH_STEPS)
             if check_homography(h_new):
                 break
-            pred_new = apply_homography(h_new, self.left)
-            r_new, idx_new = self.tree.query(pred_new)
+            pred_new = self.apply(h_new)
+            r_new, idx_new, closest_new = self.match(pred_new)
             same = np.array_equal(idx_new[inl], idx[inl]) and np.array_equal(
                 r_new < threshold_px, inl)
-            h, pred, r, idx = h_new, pred_new, r_new, idx_new
-            if same:
+            settled = float(np.max(np.abs(pred_new - pred))) < _LINE_POLISH_TOLERANCE_PX
+            h, pred, r, idx, closest = h_new, pred_new, r_new, idx_new, closest_new
+            if same and (self.n_lines == 0 or settled):
                 break
         return h, r, idx
+
+
+def _points_reason(left: np.ndarray, right: np.ndarray) -> str:
+    if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
+        return 'points have non-finite coordinates'
+    for pts, side in ((left, 'left'), (right, 'right')):
+        if pts.shape[0] < 4:
+            return f'need at least 4 {side} points, got {pts.shape[0]}'
+        if count_distinct(pts, 4) < 4:
+            return f'fewer than 4 distinct {side} points'
+        centred = pts - pts.mean(axis=0)
+        sv = np.linalg.svd(centred, compute_uv=False)
+        if sv[1] <= 1e-6 * max(sv[0], 1e-300):
+            return f'{side} points are collinear'
+    return ''
 
 
 def _check_inputs(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray, str]:
     left = as_points(left, 'left_points')
     right = as_points(right, 'right_points')
-    if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
-        return left, right, 'points have non-finite coordinates'
-    for pts, side in ((left, 'left'), (right, 'right')):
-        if pts.shape[0] < 4:
-            return left, right, f'need at least 4 {side} points, got {pts.shape[0]}'
-        if count_distinct(pts, 4) < 4:
-            return left, right, f'fewer than 4 distinct {side} points'
-        centred = pts - pts.mean(axis=0)
-        sv = np.linalg.svd(centred, compute_uv=False)
-        if sv[1] <= 1e-6 * max(sv[0], 1e-300):
-            return left, right, f'{side} points are collinear'
-    return left, right, ''
+    return left, right, _points_reason(left, right)
+
+
+def _build_state(left_points: Any, right_points: Any, left_lines: Any, right_lines: Any,
+                 line_weight: float) -> _TwoStep | str:
+    """Validate the features and build the run state, or return why they cannot fix H.
+
+    Points alone must be 4 or more, distinct and not collinear in each image; lines alone 4
+    or more and not one pencil (all concurrent or parallel). With both, a feature kind that
+    cannot fix H on its own is left out, and the estimate fails only if neither can.
+    """
+    use_lines = left_lines is not None or right_lines is not None
+    left = as_points(np.zeros((0, 2)) if left_points is None and use_lines else left_points,
+                     'left_points')
+    right = as_points(np.zeros((0, 2)) if right_points is None and use_lines
+                      else right_points, 'right_points')
+    if not use_lines:
+        reason = _points_reason(left, right)
+        return reason or _TwoStep(left, right, cKDTree(right))
+    left_seg = as_segments(np.zeros((0, 4)) if left_lines is None else left_lines,
+                           'left_lines')
+    right_seg = as_segments(np.zeros((0, 4)) if right_lines is None else right_lines,
+                            'right_lines')
+    if left.shape[0] == 0 and right.shape[0] == 0:
+        point_reason = 'no points'
+    else:
+        point_reason = _points_reason(left, right)
+    line_reason = lines_reason(left_seg, 'left') or lines_reason(right_seg, 'right')
+    if point_reason and line_reason:
+        if point_reason == 'no points':
+            return line_reason
+        return f'{point_reason}; and {line_reason}'
+    if point_reason:
+        left, right = np.zeros((0, 2)), np.zeros((0, 2))
+    if line_reason:
+        return _TwoStep(left, right, cKDTree(right))
+    left_seg = left_seg[segment_lengths(left_seg) > 0]
+    right_seg = right_seg[segment_lengths(right_seg) > 0]
+    tree = cKDTree(right) if right.shape[0] else None
+    return _TwoStep(left, right, tree, left_seg, LineMatcher(right_seg), line_weight)
 
 
 def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
@@ -248,7 +386,7 @@ def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
     if options.euclidean_refinement:
         h, r, idx = state.polish(h, options.threshold_px, matched)
     else:
-        _, r, idx = matched
+        _, r, idx, _ = matched
     h = normalise_scale(h)
     inliers = r < options.threshold_px
     if np.count_nonzero(inliers) < options.min_inliers:
@@ -256,51 +394,62 @@ def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
             f'too few inliers: {np.count_nonzero(inliers)} < min_inliers '
             f'{options.min_inliers}', iterations, trace, int(np.count_nonzero(inliers)),
             np.asarray(stages, np.int64))
+    n = state.n_points
+    idx = idx.astype(np.int64)
     return PlaneEstimate(
-        homography=h, inliers=inliers, matches=idx.astype(np.int64), residuals_px=r,
+        homography=h, inliers=inliers[:n], matches=idx[:n], residuals_px=r[:n],
         iterations=iterations, energy_trace=trace, stage_trace=np.asarray(stages, np.int64),
-        converged=converged, final_energy=float(trace[-1]), potential=options.potential)
+        converged=converged, final_energy=float(trace[-1]), potential=options.potential,
+        line_inliers=inliers[n:], line_matches=idx[n:], line_residuals_px=r[n:],
+        left_lines=state.left_segments)
 
 
 def estimate_plane(left_points: Any, right_points: Any, init: Any = None,
                    options: EstimatorConfig | None = None, *,
                    prior: PriorConfig | None = None,
                    image_size: tuple[int, int] | None = None,
+                   left_lines: Any = None, right_lines: Any = None,
                    **overrides: Any) -> PlaneEstimate | FailedEstimate:
-    """Estimate the dominant plane's homography from two point sets without correspondences.
+    """Estimate the dominant plane's homography from two feature sets without correspondences.
+
+    The features are points, line segments, or both (a joint energy in which a segment
+    weighs ``options.line_weight`` times a point).
 
     Args:
-        left_points: (N, 2) float64 left image points (x, y).
+        left_points: (N, 2) float64 left image points (x, y); None or (0, 2) with lines only.
         right_points: (M, 2) float64 right image points.
         init: Optional (3, 3) (or 9 values, row-major) initial homography: the warm start.
             Without it, candidates from ``prior`` are screened and the best few iterated.
         options: Estimator settings; keyword ``overrides`` (e.g. ``potential='huber'``,
-            ``lambda_weight=0.3``, ``threshold_px=2.0``, ``max_iterations=50``) replace
-            fields of it.
+            ``lambda_weight=0.3``, ``threshold_px=2.0``, ``max_iterations=50``,
+            ``line_weight=0.5``) replace fields of it.
         prior: Camera set-up ranges, used when ``init`` is None (defaults to
             ``PriorConfig()``).
         image_size: ``(width, height)`` of the left image, needed with the prior (principal
             point at its centre).
+        left_lines: Optional (K, 4) float64 left segments ``(x1, y1, x2, y2)``
+            (:func:`domplane_ros.lines.detect_lines`).
+        right_lines: Optional (L, 4) float64 right segments.
         **overrides: Fields of :class:`~domplane_ros.config.EstimatorConfig`.
 
     Returns:
         :class:`PlaneEstimate`, or :class:`FailedEstimate` with the reason (too few,
-        repeated, collinear or non-finite points, a singular initial homography, too few
-        inliers).
+        repeated, collinear or non-finite points; fewer than 4 segments or segments all
+        concurrent or parallel; a singular initial homography; too few inliers).
 
     Raises:
-        ValueError: If the arrays do not have shape (N, 2), ``init`` is not 3x3, an override
-            is invalid, or neither ``init`` nor ``image_size`` is given.
+        ValueError: If the arrays do not have shape (N, 2) (points) or (N, 4) (segments),
+            ``init`` is not 3x3, an override is invalid, or neither ``init`` nor
+            ``image_size`` is given.
 
     """
     options = _options(options, overrides)
     if init is None and image_size is None:
         raise ValueError('give an initial homography (init) or the image_size for the prior')
-    left, right, reason = _check_inputs(left_points, right_points)
-    if reason:
-        return FailedEstimate(reason)
-    tree = cKDTree(right)
-    state = _TwoStep(left, right, tree)
+    state = _build_state(left_points, right_points, left_lines, right_lines,
+                         options.line_weight)
+    if isinstance(state, str):
+        return FailedEstimate(state)
     if init is not None:
         h0 = as_homography(init, 'init')
         reason = check_homography(h0)
@@ -310,11 +459,27 @@ def estimate_plane(left_points: Any, right_points: Any, init: Any = None,
     return _search_prior(state, prior or PriorConfig(), options, image_size)
 
 
+def screening_energy(state: _TwoStep, candidates: np.ndarray, threshold_px: float
+                     ) -> np.ndarray:
+    """Return (M,) truncated closest-feature energies of candidate homographies.
+
+    Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.prior.screen_candidates`), segments
+    the same with the closest-line distance, weighted by the line weight.
+    """
+    costs = np.zeros(candidates.shape[0])
+    if state.n_points:
+        costs += screen_candidates(candidates, state.left, state.tree, threshold_px)
+    if state.n_lines:
+        costs += state.line_weight * screen_line_candidates(
+            candidates, state.left_segments, state.matcher, threshold_px)
+    return costs
+
+
 def _search_prior(state: _TwoStep, prior: PriorConfig, options: EstimatorConfig,
                   image_size: tuple[int, int]) -> PlaneEstimate | FailedEstimate:
     width, height = image_size
     candidates = prior_candidates(prior, width, height)
-    costs = screen_candidates(candidates, state.left, state.tree, prior.screen_threshold_px)
+    costs = screening_energy(state, candidates, prior.screen_threshold_px)
     order = np.argsort(costs)[:prior.refine_best]
     best: PlaneEstimate | FailedEstimate | None = None
     for i in order:

@@ -305,7 +305,8 @@ class NormalisedRefiner:
         return 0.5 * float(np.sum(sq)) / self.dst_scale ** 2
 
     def extrapolate(self, previous: np.ndarray, current: np.ndarray, dst: np.ndarray,
-                    factor: float, bound: float) -> tuple[np.ndarray, float] | None:
+                    factor: float, bound: float, weights: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, float] | None:
         """Over-relax: move past ``current`` along ``current - previous`` by ``factor``.
 
         Args:
@@ -314,6 +315,7 @@ class NormalisedRefiner:
             dst: (N, 2) float64 destinations of the transfer energy.
             factor: Extrapolation factor (0 gives ``current``).
             bound: Largest admissible transfer energy of the result.
+            weights: Optional (N,) non-negative weights of the transfer energy.
 
         Returns:
             ``(H, energy)`` when the extrapolated homography's transfer energy is at most
@@ -329,7 +331,7 @@ class NormalisedRefiner:
         if not np.isfinite(norm) or norm == 0:
             return None
         g = g / norm
-        e = self.energy(g, _transform(self.t_dst, dst), None)
+        e = self.energy(g, _transform(self.t_dst, dst), weights)
         if e <= bound:
             return self.from_normalised(g), e
         return None

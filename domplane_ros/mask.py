@@ -190,7 +190,8 @@ def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
 
 
 def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = None,
-            outliers: np.ndarray | None = None) -> np.ndarray:
+            outliers: np.ndarray | None = None, inlier_lines: np.ndarray | None = None,
+            outlier_lines: np.ndarray | None = None) -> np.ndarray:
     """Draw the mask and the points over a grey image.
 
     Args:
@@ -199,13 +200,15 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
             green tint, obstacle pixels red, unknown pixels none.
         inliers: Optional (N, 2) float (x, y) points, drawn as small cyan circles.
         outliers: Optional (M, 2) float (x, y) points, drawn as small magenta crosses.
+        inlier_lines: Optional (K, 4) float segments (x1, y1, x2, y2), drawn in cyan.
+        outlier_lines: Optional (L, 4) float segments, drawn in magenta.
 
     Returns:
         (H, W, 3) uint8 RGB image.
 
     Raises:
-        ValueError: If the image or mask is not (H, W) uint8 of the same shape, or a point
-            array is not (N, 2).
+        ValueError: If the image or mask is not (H, W) uint8 of the same shape, a point
+            array is not (N, 2) or a segment array not (N, 4).
 
     """
     gray = check_gray(gray, 'gray')
@@ -220,6 +223,20 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
             tinted = cv2.addWeighted(rgb, 1.0 - _TINT_ALPHA, np.full_like(rgb, colour),
                                      _TINT_ALPHA, 0.0)
             cv2.copyTo(tinted, region, rgb)
+    for name, segments, colour in (('inlier_lines', inlier_lines, _INLIER_RGB),
+                                   ('outlier_lines', outlier_lines, _OUTLIER_RGB)):
+        if segments is None:
+            continue
+        seg = np.asarray(segments, dtype=np.float64)
+        if seg.size == 0:
+            continue
+        if seg.ndim != 2 or seg.shape[1] != 4:
+            raise ValueError(f'{name} must have shape (N, 4), got {seg.shape}')
+        seg = seg[np.all(np.isfinite(seg), axis=1)]
+        fixed = np.clip(np.rint(seg * 16).astype(np.int64), -(2 ** 24), 2 ** 24)
+        for x1, y1, x2, y2 in fixed:
+            cv2.line(rgb, (int(x1), int(y1)), (int(x2), int(y2)), colour, 1, cv2.LINE_AA,
+                     shift=4)
     radius = max(2, int(round(min(gray.shape) / 160)))
     for name, points, colour in (('inliers', inliers, _INLIER_RGB),
                                  ('outliers', outliers, _OUTLIER_RGB)):

@@ -22,8 +22,7 @@ from domplane_ros.errors import ImageDecodeError
 from domplane_ros.health import (homography_problem, new_counts, problem_key, StampChecks,
                                  Throttle)
 from domplane_ros.image import message_to_gray
-from domplane_ros.mask import overlay
-from domplane_ros.pipeline import FrameResult, PlanePipeline
+from domplane_ros.pipeline import debug_overlay, FrameResult, PlanePipeline
 from domplane_ros.ros_io import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros_io import READ_ONLY
 from domplane_ros.sync import ApproximateTimeSync, Pair
@@ -263,10 +262,7 @@ class PlaneNode(Node):
                              key='no plane ' + problem_key(result.reason))
         self._pub_mask.publish(image_msg(result.mask, header, 'mono8'))
         if self._pub_debug.get_subscription_count() > 0:
-            inl = result.estimate.inliers if result.ok else None
-            pts = result.left_points
-            rgb = overlay(left, result.mask, pts[inl] if inl is not None else None,
-                          pts[~inl] if inl is not None else pts)
+            rgb = debug_overlay(left, result)
             self._pub_debug.publish(image_msg(rgb, header, 'rgb8'))
         self._latency_ms.append(1e3 * (time.perf_counter() - t0))
         self._counters['processed'] += 1

@@ -16,7 +16,8 @@ from domplane_ros.features import detect_corners, roi_to_pixels
 from domplane_ros.health import homography_problem, inlier_spread, PairChecks, texture_note
 from domplane_ros.homography import apply_homography
 from domplane_ros.image import check_gray
-from domplane_ros.mask import plane_mask
+from domplane_ros.lines import detect_lines, endpoints
+from domplane_ros.mask import overlay, plane_mask
 from domplane_ros.prior import prior_candidates
 import numpy as np
 
@@ -48,6 +49,9 @@ class FrameResult:
         timings_ms: Milliseconds spent in ``features``, ``estimate``, ``mask`` and ``total``.
         warnings: Input problems that did not refuse the pair (a stamp jump, a size change),
             each a one-line message (see :mod:`domplane_ros.health`).
+        left_lines: (K, 4) float64 left line segments ``(x1, y1, x2, y2)`` (empty unless
+            ``features.kind`` is ``lines`` or ``both``).
+        right_lines: (L, 4) float64 right line segments.
 
     """
 
@@ -63,6 +67,8 @@ class FrameResult:
     state: str
     timings_ms: dict[str, float] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()
+    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    right_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
 
     @property
     def n_inliers(self) -> int:
@@ -162,34 +168,35 @@ class PlanePipeline:
         cfg = self.config
         if check.refused:
             return self._refused(left, stamp_ns, check.refused, check.warnings, t0)
-        left_pts = detect_corners(left, cfg.features)
-        right_pts = detect_corners(right, cfg.features)
+        feats = _detect(left, right, cfg)
+        left_pts, right_pts = feats[0], feats[1]
+        n_features = left_pts.shape[0] + feats[2].shape[0]
         t1 = time.perf_counter()
         height, width = left.shape
         reinit = self._last_h is None
-        estimate = self._estimate(left_pts, right_pts, (width, height))
+        estimate = self._estimate(feats, (width, height))
         if estimate.ok and not reinit:
-            reason = self._suspicious(estimate, left_pts.shape[0], (width, height))
+            reason = self._suspicious(estimate, n_features, (width, height))
             if reason:
                 # The warm start went astray: start again from the prior in this frame.
                 reinit = True
                 self._last_h = None
-                estimate = self._estimate(left_pts, right_pts, (width, height))
+                estimate = self._estimate(feats, (width, height))
         elif not estimate.ok and not reinit:
             reinit = True
             self._last_h = None
-            estimate = self._estimate(left_pts, right_pts, (width, height))
+            estimate = self._estimate(feats, (width, height))
         if reinit:
             self.stats.reinitialisations += 1
         reason = estimate.reason
         if estimate.ok:
-            reason = self._suspicious(estimate, left_pts.shape[0], (width, height),
-                                      energy=False)
+            reason = self._suspicious(estimate, n_features, (width, height), energy=False)
             if reason:
                 self.checks.counts['outside_prior'] += 1
             else:
                 reason = self._input_problem(estimate, left_pts, (width, height))
-        elif left_pts.shape[0] < cfg.estimator.min_inliers or right_pts.shape[0] < 4:
+        elif (n_features < cfg.estimator.min_inliers
+              or right_pts.shape[0] + feats[3].shape[0] < 4):
             self.checks.counts['too_few_features'] += 1
             reason += (f' (left {texture_note(left)}; right {texture_note(right)})')
         t2 = time.perf_counter()
@@ -197,7 +204,7 @@ class PlanePipeline:
             h = estimate.homography
             mask = plane_mask(left, right, h, cfg.mask)
             self._last_h = h
-            self._last_energy_per_point = estimate.final_energy / max(left_pts.shape[0], 1)
+            self._last_energy_per_point = estimate.final_energy / max(n_features, 1)
             self.stats.succeeded += 1
             ok = True
         else:
@@ -213,7 +220,8 @@ class PlanePipeline:
         return FrameResult(stamp_ns=stamp_ns, ok=ok, homography=h, mask=mask,
                            estimate=estimate, left_points=left_pts, right_points=right_pts,
                            reinitialised=reinit, reason='' if ok else reason,
-                           state=self.state, timings_ms=timings, warnings=check.warnings)
+                           state=self.state, timings_ms=timings, warnings=check.warnings,
+                           left_lines=feats[2], right_lines=feats[3])
 
     def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
                  warnings: tuple[str, ...], t0: float) -> FrameResult:
@@ -241,7 +249,11 @@ class PlanePipeline:
         min_spread = self.config.pipeline.min_inlier_spread
         if min_spread > 0:
             x0, y0, x1, y1 = roi_to_pixels(self.config.features.roi, *size)
-            spread = inlier_spread(left_pts[estimate.inliers], float((x1 - x0) * (y1 - y0)))
+            # Inlier corners and the endpoints of inlier segments.
+            inliers = np.concatenate([
+                left_pts[estimate.inliers],
+                endpoints(estimate.left_lines[estimate.line_inliers])])
+            spread = inlier_spread(inliers, float((x1 - x0) * (y1 - y0)))
             if spread < min_spread:
                 self.checks.counts['degenerate_geometry'] += 1
                 return (f'degenerate geometry: the inliers span {100 * spread:.2f} % of the '
@@ -249,26 +261,30 @@ class PlanePipeline:
                         'collinear or packed in one patch, they do not constrain the plane')
         return ''
 
-    def _estimate(self, left_pts: np.ndarray, right_pts: np.ndarray,
-                  size: tuple[int, int]) -> PlaneEstimate | FailedEstimate:
+    def _estimate(self, feats: tuple[np.ndarray, ...], size: tuple[int, int]
+                  ) -> PlaneEstimate | FailedEstimate:
         cfg = self.config
-        if left_pts.shape[0] < cfg.estimator.min_inliers:
-            return FailedEstimate(f'too few left features: {left_pts.shape[0]} < '
+        left_pts, right_pts, left_lines, right_lines = feats
+        n_left = left_pts.shape[0] + left_lines.shape[0]
+        n_right = right_pts.shape[0] + right_lines.shape[0]
+        if n_left < cfg.estimator.min_inliers:
+            return FailedEstimate(f'too few left features: {n_left} < '
                                   f'min_inliers {cfg.estimator.min_inliers}')
-        if right_pts.shape[0] < 4:
-            return FailedEstimate(f'too few right features: {right_pts.shape[0]}')
+        if n_right < 4:
+            return FailedEstimate(f'too few right features: {n_right}')
+        lines = ({} if cfg.features.kind == 'points'
+                 else {'left_lines': left_lines, 'right_lines': right_lines})
         if self._last_h is not None:
             warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
                                                            cfg.pipeline.warm_gnc_start_px))
-            return estimate_plane(left_pts, right_pts, self._last_h, warm)
+            return estimate_plane(left_pts, right_pts, self._last_h, warm, **lines)
         if cfg.initial_homography:
             first = estimate_plane(left_pts, right_pts, np.array(cfg.initial_homography),
-                                   cfg.estimator)
-            if first.ok and not self._suspicious(first, left_pts.shape[0], size,
-                                                 energy=False):
+                                   cfg.estimator, **lines)
+            if first.ok and not self._suspicious(first, n_left, size, energy=False):
                 return first
         return estimate_plane(left_pts, right_pts, None, cfg.estimator, prior=cfg.prior,
-                              image_size=size)
+                              image_size=size, **lines)
 
     def _suspicious(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
                     energy: bool = True) -> str:
@@ -297,6 +313,50 @@ class PlanePipeline:
             self._bounds_cache[size] = (mapped.min(axis=0) - margin,
                                         mapped.max(axis=0) + margin)
         return self._bounds_cache[size]
+
+
+def debug_overlay(left: np.ndarray, result: FrameResult) -> np.ndarray:
+    """Return the (H, W, 3) uint8 RGB debug image of a frame: mask tint, features.
+
+    Inlier corners are cyan circles and inlier segments cyan lines; the rest magenta (all of
+    them when no plane was found).
+
+    Args:
+        left: (H, W) uint8 left image of the frame.
+        result: The pipeline's result for it.
+
+    """
+    pts = result.left_points
+    segs = result.left_lines
+    est = result.estimate
+    if result.ok and pts.shape[0] == est.inliers.shape[0]:
+        inl = est.inliers
+    else:
+        inl = np.zeros(pts.shape[0], bool)
+    if result.ok and segs.shape[0] == est.line_inliers.shape[0]:
+        line_inl = est.line_inliers
+    else:
+        line_inl = np.zeros(segs.shape[0], bool)
+    return overlay(left, result.mask, pts[inl], pts[~inl], segs[line_inl], segs[~line_inl])
+
+
+def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return left and right corners and segments, as ``features.kind`` asks."""
+    kind = cfg.features.kind
+    none_pts = np.zeros((0, 2))
+    none_seg = np.zeros((0, 4))
+    if kind == 'lines':
+        left_pts = right_pts = none_pts
+    else:
+        left_pts = detect_corners(left, cfg.features)
+        right_pts = detect_corners(right, cfg.features)
+    if kind == 'points':
+        left_seg = right_seg = none_seg
+    else:
+        left_seg = detect_lines(left, cfg.features)
+        right_seg = detect_lines(right, cfg.features)
+    return left_pts, right_pts, left_seg, right_seg
 
 
 def _bounds_prior(prior: PriorConfig) -> PriorConfig:

@@ -660,7 +660,9 @@ class _CsvOutput:
         timings = result.timings_ms
         self._csv.writerow([
             result.stamp_ns, int(result.ok), int(result.reinitialised),
-            result.left_points.shape[0], result.right_points.shape[0], result.n_inliers,
+            # Features: corners plus line segments (features.kind lines or both).
+            result.left_points.shape[0] + result.left_lines.shape[0],
+            result.right_points.shape[0] + result.right_lines.shape[0], result.n_inliers,
             int(getattr(estimate, 'iterations', 0)),
             '' if final_energy is None else repr(float(final_energy)),
             int(bool(getattr(estimate, 'converged', False))),

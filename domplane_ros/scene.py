@@ -34,6 +34,11 @@ from domplane_ros import prior
 import numpy as np
 
 FLOOR_KINDS = ('random', 'tiles', 'planks', 'checker')
+# Low-texture floors: flat albedo with faint noise between contrasting joints, so that almost
+# all structure is in straight lines (the joints). Not drawn by ``random_scene(floor=None)``,
+# so existing seeds keep their floors; ask for them by name.
+PLAIN_FLOOR_KINDS = ('tiles_plain', 'planks_plain')
+ALL_FLOOR_KINDS = FLOOR_KINDS + PLAIN_FLOOR_KINDS
 BACKGROUNDS = ('horizon', 'wall')
 
 # Texture rasters: size in texels (a power of two, so the mip pyramid halves exactly) and the
@@ -228,8 +233,13 @@ def _random_texture(rng: np.random.Generator, size: int, octaves: Sequence[tuple
 
 def _floor_texture(kind: str, variant: int) -> np.ndarray:
     """Return the (N, N) float32 floor raster in [0, 1] (period N * _FLOOR_TEXEL)."""
-    rng = np.random.default_rng(1000 + 17 * variant + FLOOR_KINDS.index(kind))
+    if kind not in ALL_FLOOR_KINDS:
+        raise ValueError(
+            f'unknown floor kind {kind!r}; expected one of {", ".join(ALL_FLOOR_KINDS)}')
+    rng = np.random.default_rng(1000 + 17 * variant + ALL_FLOOR_KINDS.index(kind))
     n = _FLOOR_TEXELS
+    if kind in PLAIN_FLOOR_KINDS:
+        return _plain_floor_texture(kind, rng, n)
     if kind == 'random':
         return _random_texture(rng, n, ((16, 1.0), (64, 0.8), (256, 0.6), (512, 0.35)),
                                sharpness=1.6, grain=0.04)
@@ -268,6 +278,38 @@ def _floor_texture(kind: str, variant: int) -> np.ndarray:
         tex = np.where(idx[:, None] ^ idx[None, :], 0.75, 0.25).astype(np.float32) + weak
         return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
     raise ValueError(f'unknown floor kind {kind!r}; expected one of {", ".join(FLOOR_KINDS)}')
+
+
+def _plain_floor_texture(kind: str, rng: np.random.Generator, n: int) -> np.ndarray:
+    """Return a low-texture floor raster: flat albedo, faint noise, contrasting joints.
+
+    ``tiles_plain``: 0.64 x 0.64 tiles (camera height 1) of one albedo with 2.5 % noise and
+    dark 1.5 cm joints, so corners exist only where joints cross. ``planks_plain``: 16 cm wide
+    planks, 1.5 to 3.5 m long, of one albedo with faint grain, dark side joints and end joints,
+    so corners exist only at the end joints (T-junctions).
+    """
+    faint = 0.025 * _normalise(_periodic_noise(rng, n, n // 4))
+    if kind == 'tiles_plain':
+        tile = 128
+        tex = np.full((n, n), 0.62, np.float32) + faint
+        idx = np.arange(n) % tile
+        joint = idx < 3
+        tex[joint, :] = 0.28
+        tex[:, joint] = 0.28
+        return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
+    plank = 32
+    tex = np.full((n, n), 0.55, np.float32) + faint
+    for col in range(n // plank):
+        cols = slice(col * plank, (col + 1) * plank)
+        start = int(rng.integers(0, n))
+        pos = 0
+        while pos < n:
+            length = int(rng.integers(300, 700))
+            rows = (np.arange(pos, min(pos + length, n)) + start) % n
+            tex[rows[:3], cols] = 0.22
+            pos += length
+        tex[:, col * plank:col * plank + 2] = 0.22
+    return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
 
 
 def _box_texture(variant: int) -> np.ndarray:
@@ -642,7 +684,8 @@ def render_stereo(setup: CameraSetup, boxes: Sequence[Box] = (), floor: str = 'r
     Args:
         setup: The stereo head.
         boxes: Boxes standing on the floor, in the level frame.
-        floor: Floor texture kind, one of :data:`FLOOR_KINDS`.
+        floor: Floor texture kind, one of :data:`ALL_FLOOR_KINDS` (:data:`FLOOR_KINDS` or
+            the low-texture :data:`PLAIN_FLOOR_KINDS`).
         seed: Picks the texture variant (``seed % TEXTURE_VARIANTS``) and the box face
             textures, and seeds the pixel noise unless ``noise_seed`` is given.
         gain: Gain of the right camera relative to the left one.
@@ -665,9 +708,9 @@ def render_stereo(setup: CameraSetup, boxes: Sequence[Box] = (), floor: str = 'r
             photometric parameter, or ``supersample < 1``.
 
     """
-    if floor not in FLOOR_KINDS:
+    if floor not in ALL_FLOOR_KINDS:
         raise ValueError(f'unknown floor kind {floor!r}; expected one of '
-                         f'{", ".join(FLOOR_KINDS)}')
+                         f'{", ".join(ALL_FLOOR_KINDS)}')
     if background not in BACKGROUNDS:
         raise ValueError(f'unknown background {background!r}; expected one of '
                          f'{", ".join(BACKGROUNDS)}')
@@ -801,7 +844,8 @@ def random_scene(seed: int, width: int = 640, height: int = 480, floor: str | No
         seed: Seed of every random choice; the same seed gives the same frame.
         width: Image width in pixels.
         height: Image height in pixels.
-        floor: Floor kind, or None for a random one of :data:`FLOOR_KINDS`.
+        floor: Floor kind (one of :data:`ALL_FLOOR_KINDS`), or None for a random one of
+            :data:`FLOOR_KINDS`.
         n_boxes: Number of boxes, or an inclusive ``(min, max)`` range to draw from.
         gain: Right camera gain, or None to draw one in [0.8, 1.25].
         offset: Right camera offset in grey levels, or None to draw one in [-20, 20].

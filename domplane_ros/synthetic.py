@@ -128,3 +128,93 @@ def plane_error_px(estimate: np.ndarray, truth: np.ndarray, points: np.ndarray) 
     """Return the mean transfer error between two homographies over (N, 2) points, pixels."""
     diff = apply_homography(estimate, points) - apply_homography(truth, points)
     return float(np.mean(np.linalg.norm(diff, axis=1)))
+
+
+@dataclass(frozen=True)
+class LineScene:
+    """Left and right line segments with the truth.
+
+    Attributes:
+        left: (N, 4) float64 left segments ``(x1, y1, x2, y2)``.
+        right: (M, 4) float64 right segments, shuffled, with endpoints that do not correspond
+            to the left ones (each right segment is a random part of the mapped line).
+        homography: (3, 3) float64 true plane homography, left to right.
+        on_plane: (N,) bool, left segments that lie on the plane.
+        width: Image width in pixels.
+        height: Image height in pixels.
+
+    """
+
+    left: np.ndarray
+    right: np.ndarray
+    homography: np.ndarray
+    on_plane: np.ndarray
+    width: int
+    height: int
+
+
+def line_scene(rng: np.random.Generator, n_lines: int = 120, outlier_fraction: float = 0.3,
+               missing_fraction: float = 0.1, noise_px: float = 0.3,
+               homography: np.ndarray | None = None, width: int = 640, height: int = 480,
+               directions_deg: np.ndarray | None = None,
+               through_point: tuple[float, float] | None = None) -> LineScene:
+    """Draw a line-segment scene.
+
+    Args:
+        rng: Random generator (seeded by the caller).
+        n_lines: Number of left segments before removing missing ones.
+        outlier_fraction: Fraction of segments off the plane (shifted by an extra disparity).
+        missing_fraction: Fraction of segments detected in one image only.
+        noise_px: Standard deviation of the endpoint noise, pixels.
+        homography: True homography; drawn with :func:`random_plane_homography` if None.
+        width: Image width.
+        height: Image height.
+        directions_deg: Optional directions to draw the left segments' angles from (e.g. one
+            value for all-parallel segments).
+        through_point: Optional point all left lines pass through (a concurrent pencil).
+
+    Returns:
+        The :class:`LineScene`.
+
+    """
+    h = random_plane_homography(rng, width, height) if homography is None else homography
+    segs = []
+    while len(segs) < n_lines:
+        length = rng.uniform(40.0, 220.0)
+        if directions_deg is not None:
+            angle = np.radians(rng.choice(np.asarray(directions_deg, np.float64)))
+        else:
+            angle = rng.uniform(0.0, np.pi)
+        d = np.array([np.cos(angle), np.sin(angle)])
+        if through_point is not None:
+            start = np.asarray(through_point) + rng.uniform(-300.0, 300.0) * d
+        else:
+            start = rng.uniform([0, 0], [width - 1, height - 1])
+        end = start + length * d
+        seg = np.array([start, end])
+        mapped = apply_homography(h, seg)
+        if (np.all((seg >= 0) & (seg <= [width - 1, height - 1]))
+                and np.all((mapped >= 0) & (mapped <= [width - 1, height - 1]))):
+            segs.append(seg.ravel())
+    left = np.array(segs)
+    right = apply_homography(h, left.reshape(-1, 2)).reshape(-1, 4)
+    on_plane = rng.random(n_lines) >= outlier_fraction
+    n_off = int(np.count_nonzero(~on_plane))
+    shift = rng.uniform(4.0, 40.0, n_off)
+    right[~on_plane, 0] -= shift
+    right[~on_plane, 2] -= shift
+    # Fragment: each right segment is a random part (70-100 %) of the mapped segment, or a bit
+    # longer, so endpoints do not correspond.
+    t0 = rng.uniform(-0.15, 0.15, n_lines)
+    t1 = rng.uniform(0.85, 1.15, n_lines)
+    p, q = right[:, 0:2].copy(), right[:, 2:4].copy()
+    right[:, 0:2] = p + (q - p) * t0[:, None]
+    right[:, 2:4] = p + (q - p) * t1[:, None]
+    right += rng.normal(0.0, noise_px, right.shape)
+    missing = rng.random(n_lines) < missing_fraction
+    only_left = missing & (rng.random(n_lines) < 0.5)
+    only_right = missing & ~only_left
+    right = right[~only_left]
+    right = right[rng.permutation(right.shape[0])]
+    return LineScene(left=left[~only_right], right=right, homography=h,
+                     on_plane=on_plane[~only_right], width=width, height=height)
