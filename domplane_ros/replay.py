@@ -10,6 +10,7 @@ same resets), and writes a new bag with the node's outputs::
     plane_replay INPUT_BAG OUTPUT_BAG [--params-file config/plane_node.yaml]
                  [--left-topic /left/image_raw] [--right-topic /right/image_raw]
                  [--storage sqlite3|mcap] [--force] [--csv FILE] [--no-progress]
+                 [--strict] [--keep-partial]
 
 Output topics, each written with the bag timestamp of the left image's header stamp:
 
@@ -26,8 +27,9 @@ not give (undecodable payloads: skipped, counted, named on stderr and recorded i
 ``metadata.yaml`` ``custom_data``; ``--strict`` makes them fatal); 2 when the run is refused
 before anything is written (missing, unreadable or truncated bag, a folder without
 metadata.yaml, unknown topic, existing output without ``--force``, invalid params file); 1 when
-reading fails part-way (a damaged bag, say): the partial output is removed; 130 on Ctrl-C and
-143 on SIGTERM, the partial output removed.
+reading fails part-way (a damaged bag, say): the partial output is removed, or with
+``--keep-partial`` kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its
+metadata); 130 on Ctrl-C and 143 on SIGTERM, the partial output removed.
 
 The output is written into a hidden temporary folder next to ``OUTPUT_BAG`` and renamed into
 place only when it is complete, so an interrupted run never leaves a bag that looks complete.
@@ -96,7 +98,14 @@ CSV_COLUMNS = (
 
 
 class BagReadError(BagError):
-    """Reading a bag failed part-way (a truncated or corrupt file)."""
+    """Reading a bag failed part-way (a truncated or corrupt file).
+
+    Attributes:
+        kept: Where the output up to the failure was kept (``--keep-partial``), or ''.
+
+    """
+
+    kept = ''
 
 
 class Terminated(KeyboardInterrupt):
@@ -616,17 +625,18 @@ class BagOutput:
         """Record a key/value string in the output bag's metadata.yaml ``custom_data``."""
         self._writer.set_custom_data(key, value)
 
-    def commit(self) -> None:
-        """Close the bag and move it into place."""
+    def commit(self, path: str | os.PathLike[str] | None = None) -> None:
+        """Close the bag and move it into place (to ``path`` instead, if given)."""
         self._writer.close()
         finished = self._tmpdir / self.path.name
-        if self.path.exists() or self.path.is_symlink():
+        target = Path(path) if path is not None else self.path
+        if target.exists() or target.is_symlink():
             if not self.replace:
-                raise BagError(f'output {str(self.path)!r} appeared while replaying; '
+                raise BagError(f'output {str(target)!r} appeared while replaying; '
                                f'the result is left in {str(finished)!r}')
             # Move the old one aside first, so the rename below is atomic.
-            os.replace(self.path, self._tmpdir / 'replaced')
-        os.replace(finished, self.path)
+            os.replace(target, self._tmpdir / 'replaced')
+        os.replace(finished, target)
         shutil.rmtree(self._tmpdir, ignore_errors=True)
 
     def abort(self) -> None:
@@ -673,13 +683,13 @@ class _CsvOutput:
         ])
         self.rows += 1
 
-    def commit(self) -> None:
+    def commit(self, path: Path | None = None) -> None:
         self._stream.close()
         # mkstemp makes the file private; give it the permissions open() would have.
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(self._tmp, 0o666 & ~umask)
-        os.replace(self._tmp, self.path)
+        os.replace(self._tmp, path if path is not None else self.path)
 
     def abort(self) -> None:
         self._stream.close()
@@ -855,7 +865,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                force: bool = False, csv_path: str | os.PathLike[str] | None = None,
                progress: bool = False,
                on_frame: Callable[[ReplayedFrame], None] | None = None,
-               strict: bool = False) -> ReplaySummary:
+               strict: bool = False, keep_partial: bool = False) -> ReplaySummary:
     """Replay a bag through the pipeline and write the node's outputs to a new bag.
 
     Everything that can be checked up front is checked before anything is written.
@@ -873,13 +883,16 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
         on_frame: Called with every processed pair, after it is written.
         strict: Fail (``BagReadError``, partial output removed) on the first message that
             cannot be deserialised, instead of skipping and counting it.
+        keep_partial: On a read failure part-way, keep the output up to it as
+            ``OUTPUT_BAG.incomplete`` (and ``CSV.incomplete``), marked
+            ``plane_replay.complete: 'false'`` in its metadata, instead of removing it.
 
     Returns:
         The summary.
 
     Raises:
         BagReadError: If reading fails part-way (or, with ``strict``, a message cannot be
-            deserialised); the partial output is removed.
+            deserialised); the partial output is removed (or kept, see ``keep_partial``).
         BagError: If the run is refused (missing or unreadable bag, unknown topic, existing
             output); nothing is written.
         ValueError: If ``storage`` is not one of the names in :data:`STORAGES`.
@@ -893,6 +906,14 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     if not input_path.exists():
         raise BagError(f'input bag {str(input_path)!r} does not exist')
     _check_paths(input_path, output_path, csv_file, force)
+    incomplete = output_path.with_name(output_path.name + '.incomplete')
+    csv_incomplete = (csv_file.with_name(csv_file.name + '.incomplete')
+                      if csv_file is not None else None)
+    if keep_partial and not force:
+        for path in (incomplete, csv_incomplete):
+            if path is not None and (path.exists() or path.is_symlink()):
+                raise BagError(f'{str(path)!r} exists (where --keep-partial would put a '
+                               'partial output); use --force to replace it')
     t_start = time.perf_counter()
     with BagInput(input_path, left_topic, right_topic) as bag:
         out_storage = storage or bag.storage
@@ -944,10 +965,30 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
             output.set_custom_data('plane_replay.input_bag', str(input_path))
             output.set_custom_data('plane_replay.skipped_messages',
                                    str(len(bag.undecodable)))
+            output.set_custom_data('plane_replay.complete', 'true')
             bar.close()
             if table is not None:
                 table.commit()
             output.commit()
+        except BagReadError as err:
+            bar.close()
+            if not keep_partial:
+                output.abort()
+                if table is not None:
+                    table.abort()
+                raise
+            output.set_custom_data('plane_replay.input_bag', str(input_path))
+            output.set_custom_data('plane_replay.skipped_messages',
+                                   str(len(bag.undecodable)))
+            output.set_custom_data('plane_replay.complete', 'false')
+            output.set_custom_data('plane_replay.error', str(err))
+            output.commit(incomplete)
+            if table is not None:
+                table.commit(csv_incomplete)
+            kept = BagReadError(f'{err}; the output up to the failure is in '
+                                f'{str(incomplete)!r} (incomplete)')
+            kept.kept = str(incomplete)
+            raise kept from err
         except BaseException:
             bar.close()
             output.abort()
@@ -1027,6 +1068,10 @@ def build_parser() -> argparse.ArgumentParser:
                         help='replace an existing OUTPUT_BAG (and --csv file)')
     parser.add_argument('--csv', metavar='FILE',
                         help='write one CSV row per processed pair to FILE')
+    parser.add_argument('--keep-partial', action='store_true',
+                        help='if reading fails part-way, keep the output up to the failure as '
+                             'OUTPUT_BAG.incomplete (marked incomplete in its metadata) '
+                             'instead of removing it')
     parser.add_argument('--strict', action='store_true',
                         help='fail (exit 1, output removed) on the first message that cannot '
                              'be deserialised, instead of skipping it (exit 3)')
@@ -1073,12 +1118,13 @@ def main(argv: list[str] | None = None) -> int:
         summary = run_replay(args.input_bag, args.output_bag, config,
                              left_topic=args.left_topic, right_topic=args.right_topic,
                              storage=args.storage, force=args.force, csv_path=args.csv,
-                             progress=progress, strict=args.strict)
+                             progress=progress, strict=args.strict,
+                             keep_partial=args.keep_partial)
     except Terminated:
         _error('terminated (SIGTERM); the partial output was removed')
         return EXIT_TERMINATED
     except BagReadError as err:
-        _error(f'{err}; the partial output was removed')
+        _error(str(err) if err.kept else f'{err}; the partial output was removed')
         return EXIT_FAILED
     except BagError as err:
         _error(str(err))

@@ -90,6 +90,33 @@ def test_truncated_sqlite_tail_fails_part_way_and_removes_output(tmp_path, frame
     assert tree(tmp_path) == before
 
 
+def test_keep_partial_keeps_the_output_up_to_a_failure_marked_incomplete(tmp_path, frames,
+                                                                         capsys):
+    inp = tmp_path / 'in'
+    write_bag(inp, frames, 'sqlite3')
+    data = _storage_file(inp).read_bytes()
+    _storage_file(inp).write_bytes(data[:-100])
+    out, csv_path = tmp_path / 'out', tmp_path / 'pairs.csv'
+    rc, err, _ = _run(capsys, inp, out, '--csv', csv_path, '--keep-partial')
+    assert rc == 1
+    kept = tmp_path / 'out.incomplete'
+    assert len(err) == 1 and 'failed after' in err[0]
+    assert repr(str(kept)) + ' (incomplete)' in err[0]
+    assert not out.exists() and not csv_path.exists()
+    assert not [p for p in tree(tmp_path) if 'partial' in p]
+    meta = yaml.safe_load((kept / 'metadata.yaml').read_text())
+    custom = meta['rosbag2_bagfile_information']['custom_data']
+    assert custom['plane_replay.complete'] == 'false'
+    assert 'failed after' in custom['plane_replay.error']
+    masks = read_bag(kept)['messages']['/plane/mask']
+    assert 0 < len(masks) < len(frames)
+    rows = (tmp_path / 'pairs.csv.incomplete').read_text().splitlines()
+    assert len(rows) == 1 + len(masks)
+    # A second run does not silently replace the kept output.
+    rc, err, _ = _run(capsys, inp, out, '--keep-partial')
+    assert rc == 2 and 'out.incomplete' in err[0] and '--force' in err[0]
+
+
 def _bag_with_bad_payloads(path: Path, frames, storage: str) -> None:
     """Write a bag whose left message 2 is garbage and right message 4 cut-off CDR."""
     with Writer(path, version=9, storage_plugin=StoragePlugin[storage.upper()]) as writer:
@@ -147,7 +174,8 @@ def test_clean_bag_records_zero_skipped(tmp_path, frames, capsys):
     assert rc == 0 and err == []
     meta = yaml.safe_load((tmp_path / 'out' / 'metadata.yaml').read_text())
     assert meta['rosbag2_bagfile_information']['custom_data'] == {
-        'plane_replay.input_bag': str(tmp_path / 'in'), 'plane_replay.skipped_messages': '0'}
+        'plane_replay.input_bag': str(tmp_path / 'in'), 'plane_replay.skipped_messages': '0',
+        'plane_replay.complete': 'true'}
 
 
 _SLOW_REPLAY = """
