@@ -13,7 +13,8 @@ setup(
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
-        ('share/' + PACKAGE_NAME + '/config', sorted(glob('config/*.yaml'))),
+        ('share/' + PACKAGE_NAME + '/config',
+         sorted(glob('config/*.yaml') + glob('config/*.xml'))),
         # `ros2 run` looks for executables in <prefix>/lib/<package>/. These launchers are
         # data files, so pip (wheel and editable) and colcon both install them there; the console
         # scripts below stay in <prefix>/bin. See the comment in setup.cfg.

@@ -203,6 +203,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('qos.depth', 2, 'int', 'Subscription queue depth.', 1, 100),
     ParamSpec('diagnostics.period_s', 1.0, 'float',
               'Period of the /diagnostics status, seconds.', 0.05, 60.0),
+    ParamSpec('diagnostics.silence_s', 1.0, 'float',
+              'A camera that sends no image for this long is reported: /diagnostics WARN '
+              'naming its topic, and a throttled log warning.', 0.01, 3600.0),
 )
 
 PARAMETERS_BY_NAME: dict[str, ParamSpec] = {spec.name: spec for spec in PARAMETERS}
@@ -457,12 +460,14 @@ class TransportConfig:
     reliable: bool = False
     depth: int = 2
     diagnostics_period_s: float = 1.0
+    silence_s: float = 1.0
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""
         check_value(PARAMETERS_BY_NAME['qos.reliable'], self.reliable)
         check_value(PARAMETERS_BY_NAME['qos.depth'], self.depth)
         check_value(PARAMETERS_BY_NAME['diagnostics.period_s'], self.diagnostics_period_s)
+        check_value(PARAMETERS_BY_NAME['diagnostics.silence_s'], self.silence_s)
 
 
 def _validate_section(obj: Any, section: str) -> None:
@@ -556,7 +561,8 @@ class PlaneNodeConfig:
             sync=SyncConfig(**section('sync')),
             transport=TransportConfig(
                 reliable=values['qos.reliable'], depth=values['qos.depth'],
-                diagnostics_period_s=values['diagnostics.period_s']),
+                diagnostics_period_s=values['diagnostics.period_s'],
+                silence_s=values['diagnostics.silence_s']),
             initial_homography=tuple(values['initial_homography']),
         )
 
@@ -572,6 +578,7 @@ class PlaneNodeConfig:
         out['qos.reliable'] = self.transport.reliable
         out['qos.depth'] = self.transport.depth
         out['diagnostics.period_s'] = self.transport.diagnostics_period_s
+        out['diagnostics.silence_s'] = self.transport.silence_s
         out['initial_homography'] = list(self.initial_homography)
         return out
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from typing import Any, Mapping, Sequence
 
 from domplane_ros.health import input_diagnostic_values
@@ -18,7 +19,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
                  dropped_busy: int, dropped_sync: int, decode_errors: int, lock_state: str,
                  reinitialisations: int, consecutive_failures: int, last_result: Any,
                  last_error: str, input_counts: Sequence[Mapping[str, int]] = (),
-                 input_warning: str = '', joint_speed: float | None = None
+                 input_warning: str = '', cameras: Sequence[tuple[str, int, float, float]] = (),
+                 silence_s: float = math.inf, joint_speed: float | None = None
                  ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
@@ -42,12 +44,16 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         input_warning: An input problem seen since the last status that did not fail a pair
             (a zero stamp, a stamp jump, stamp skew beyond the slop); it makes an OK status a
             WARN and is appended to the message.
+        cameras: Per camera ``(topic, images received, images per second over the last
+            period, seconds since its last image (or since start))``; wall time in the node,
+            header-stamp time in the replay.
+        silence_s: A camera silent for longer than this makes the status WARN, naming it.
         joint_speed: The head's largest joint speed in rad/s, or None without joint input.
 
     Returns:
-        ``(level, message, values)``: level 0 OK, 1 WARN (no input, the last pair had no
-        plane, or an input warning) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a row without
-        a plane); a one-line message; key/value pairs as strings.
+        ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
+        pair had no plane, or an input warning) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a
+        row without a plane); a one-line message; key/value pairs as strings.
 
     """
     lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
@@ -55,7 +61,11 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
     # The last pair's failure: the pipeline's reason, or (no result: it was not decoded) the
     # last error.
     reason = result.reason if result is not None and not result.ok else last_error
-    if rate == 0.0:
+    silent = [(topic, age) for topic, _, _, age in cameras if age > silence_s]
+    if silent:
+        level, message = WARN, 'no images on ' + ', '.join(
+            f'{topic} for {age:.1f} s' for topic, age in silent)
+    elif rate == 0.0:
         level, message = WARN, 'no stereo pairs received'
     elif consecutive_failures >= FAILURES_FOR_ERROR:
         level, message = ERROR, f'no plane for {consecutive_failures} pairs: {reason}'
@@ -87,4 +97,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('last error', last_error or 'none'),
     ]
     values += input_diagnostic_values(*input_counts)
+    for topic, received, camera_rate, age in cameras:
+        values += [(f'{topic} images received', received),
+                   (f'{topic} rate [images/s]', f'{camera_rate:.2f}'),
+                   (f'{topic} last image age [s]', f'{age:.2f}')]
     return level, message, [(key, str(value)) for key, value in values]

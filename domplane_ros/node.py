@@ -64,7 +64,10 @@ class PlaneNode(Node):
         super().__init__('plane_node', **kwargs)
         self._values = self._declare_parameters()
         self.config = PlaneNodeConfig.from_flat(self._values)
-        self._lock = threading.Lock()          # guards pipeline, sync and config changes
+        # Guards the pipeline and config changes. Image callbacks never take it (the worker
+        # holds it while processing); they take _input_lock (stamp checks, synchroniser).
+        self._lock = threading.Lock()
+        self._input_lock = threading.Lock()
         self._cv = threading.Condition()       # guards the hand-over slot
         self._pending: Pair | None = None
         self._stop = False
@@ -85,6 +88,10 @@ class PlaneNode(Node):
         self._period_start = time.monotonic()
         self._qos_warned: set[str] = set()
         self._joint_speed: tuple[float, float] | None = None  # (rad/s, monotonic receive time)
+        # Per camera: monotonic time of the last image (None: none yet), images this period.
+        self._last_image: dict[str, float | None] = {'left': None, 'right': None}
+        self._period_images = {'left': 0, 'right': 0}
+        self._start = time.monotonic()
         self.add_on_set_parameters_callback(self._on_set_parameters)
 
         transport = self.config.transport
@@ -103,6 +110,7 @@ class PlaneNode(Node):
                 event_callbacks=SubscriptionEventCallbacks(
                     incompatible_qos=lambda info, s=side: self._on_incompatible_qos(s, info)))
             for side in ('left', 'right')]
+        self._topics = {side: sub.topic_name for side, sub in zip(('left', 'right'), self._subs)}
         self._joint_sub = None
         if self.config.head.joint_states_topic:
             # Sensor-data QoS matches both reliable and best-effort publishers.
@@ -169,7 +177,7 @@ class PlaneNode(Node):
             config = PlaneNodeConfig.from_flat(trial)
         except ConfigError as err:
             return SetParametersResult(successful=False, reason=str(err))
-        with self._lock:
+        with self._lock, self._input_lock:
             if config.sync != self.config.sync:
                 self._sync = ApproximateTimeSync(config.sync.slop_s, config.sync.queue_size)
                 self._stamp_checks.slop_ns = self._sync.slop_ns
@@ -196,8 +204,14 @@ class PlaneNode(Node):
             self.get_logger().warning(message)
 
     def _on_image(self, side: str, msg: Image) -> None:
+        now = time.monotonic()
+        last, self._last_image[side] = self._last_image[side], now
+        self._period_images[side] += 1
+        if last is not None and now - last > self.config.transport.silence_s:
+            self.get_logger().info(f'images on {self._topics[side]} again after '
+                                   f'{now - last:.1f} s')
         stamp_ns = _stamp_ns(msg)
-        with self._lock:
+        with self._input_lock:
             warnings = self._stamp_checks.observe(side, stamp_ns)
             pairs = self._sync.add(side, stamp_ns, msg)
         for warning in warnings:
@@ -287,19 +301,37 @@ class PlaneNode(Node):
         rate = self._period_pairs / elapsed
         self._period_pairs = 0
         self._period_start = now
+        cameras = []
+        sync = self._sync.stats()
+        for side in ('left', 'right'):
+            last = self._last_image[side]
+            cameras.append((self._topics[side], getattr(sync, 'received_' + side),
+                            self._period_images[side] / elapsed,
+                            now - (last if last is not None else self._start)))
+            self._period_images[side] = 0
         level, message, values = plane_status(
             rate=rate, latencies_ms=list(self._latency_ms), pairs=self._counters['pairs'],
             processed=self._counters['processed'],
             dropped_busy=self._counters['dropped_busy'],
-            dropped_sync=self._sync.stats().dropped,
+            dropped_sync=sync.dropped,
             decode_errors=self._counters['decode_errors'], lock_state=self.pipeline.state,
             reinitialisations=self.pipeline.stats.reinitialisations,
             consecutive_failures=self._counters['consecutive_failures'],
             last_result=self._last_result, last_error=self._last_error,
             input_counts=(self.pipeline.checks.counts, self._stamp_checks.counts,
                           self._decode_counts),
-            input_warning=self._input_warning, joint_speed=self.joint_speed())
+            input_warning=self._input_warning, cameras=cameras,
+            silence_s=self.config.transport.silence_s, joint_speed=self.joint_speed())
         self._input_warning = ''
+        if message.startswith('no images on '):
+            self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
+        fastest = max(camera[2] for camera in cameras)
+        if fastest > 0 and self.config.sync.slop_s >= 0.5 / fastest:
+            self.get_logger().warning(
+                f'sync.slop_s {self.config.sync.slop_s:g} s is not below half the frame period '
+                f'({fastest:.0f} images/s): a frame whose partner was lost can be paired with '
+                f'the next frame of the other camera; set sync.slop_s below {0.5 / fastest:.4f}',
+                throttle_duration_sec=60.0)
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
             level, message, values))

@@ -10,6 +10,7 @@ same resets), and writes a new bag with the node's outputs::
     plane_replay INPUT_BAG OUTPUT_BAG [--params-file config/plane_node.yaml]
                  [--left-topic /left/image_raw] [--right-topic /right/image_raw]
                  [--storage sqlite3|mcap] [--force] [--csv FILE] [--no-progress]
+                 [--strict] [--keep-partial]
 
 Output topics, each written with the bag timestamp of the left image's header stamp:
 
@@ -21,9 +22,14 @@ Output topics, each written with the bag timestamp of the left image's header st
 * ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``): the node's keys, once per
   ``diagnostics.period_s`` of bag time (1 s by default) and once at the end.
 
-Exit codes: 0 on success; 2 when the run is refused before anything is written (missing or
-unreadable bag, unknown topic, existing output without ``--force``, invalid params file);
-1 when reading fails part-way (a truncated bag, say): the partial output is removed.
+Exit codes: 0 on success; 3 when the output is complete except for messages the bag could
+not give (undecodable payloads: skipped, counted, named on stderr and recorded in the output's
+``metadata.yaml`` ``custom_data``; ``--strict`` makes them fatal); 2 when the run is refused
+before anything is written (missing, unreadable or truncated bag, a folder without
+metadata.yaml, unknown topic, existing output without ``--force``, invalid params file); 1 when
+reading fails part-way (a damaged bag, say): the partial output is removed, or with
+``--keep-partial`` kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its
+metadata); 130 on Ctrl-C and 143 on SIGTERM, the partial output removed.
 
 The output is written into a hidden temporary folder next to ``OUTPUT_BAG`` and renamed into
 place only when it is complete, so an interrupted run never leaves a bag that looks complete.
@@ -40,6 +46,7 @@ from dataclasses import dataclass, field
 import os
 from pathlib import Path
 import shutil
+import signal
 import sys
 import tempfile
 import time
@@ -73,6 +80,9 @@ STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
 EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_REFUSED = 2
+EXIT_SKIPPED = 3          # complete, but messages the bag could not give were skipped
+EXIT_INTERRUPTED = 130    # Ctrl-C
+EXIT_TERMINATED = 143     # SIGTERM
 
 # As plane_node: the latency statistics over the last this many pairs.
 _LATENCY_WINDOW = 200
@@ -88,7 +98,18 @@ CSV_COLUMNS = (
 
 
 class BagReadError(BagError):
-    """Reading a bag failed part-way (a truncated or corrupt file)."""
+    """Reading a bag failed part-way (a truncated or corrupt file).
+
+    Attributes:
+        kept: Where the output up to the failure was kept (``--keep-partial``), or ''.
+
+    """
+
+    kept = ''
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM arrived; raised like Ctrl-C so that the partial output is removed."""
 
 
 def _typestore() -> Any:
@@ -215,12 +236,22 @@ class ReplaySession:
 
     Args:
         config: The configuration (the node's parameters).
+        topics: The left and right topic names, for the per-camera diagnostics.
 
     """
 
-    def __init__(self, config: PlaneNodeConfig | None = None) -> None:
+    def __init__(self, config: PlaneNodeConfig | None = None,
+                 topics: tuple[str, str] = ('/left/image_raw', '/right/image_raw')) -> None:
         """Make a fresh pipeline and synchroniser from the configuration."""
         self.config = config if config is not None else PlaneNodeConfig()
+        self.topics = dict(zip(('left', 'right'), topics))
+        # Per camera, in bag time (header stamps): the last stamp, images received, and the
+        # count at the last diagnostics; the node keeps the same in wall time.
+        self._last_stamp_ns: dict[str, int | None] = {'left': None, 'right': None}
+        self._received = {'left': 0, 'right': 0}
+        self._received_mark = {'left': 0, 'right': 0}
+        self._first_ns: int | None = None
+        self._diag_ns: int | None = None
         self.pipeline = PlanePipeline(self.config)
         self.sync = ApproximateTimeSync(self.config.sync.slop_s, self.config.sync.queue_size)
         self.counters = _Counters()
@@ -246,6 +277,10 @@ class ReplaySession:
         """
         frames = []
         stamp_ns = header_stamp_ns(msg)
+        self._received[side] += 1
+        self._last_stamp_ns[side] = stamp_ns
+        if self._first_ns is None:
+            self._first_ns = stamp_ns
         for warning in self.stamp_checks.observe(side, stamp_ns):
             self.input_warning = warning
         for pair in self.sync.add(side, stamp_ns, msg):
@@ -296,11 +331,14 @@ class ReplaySession:
         self.counters.undecodable_messages += 1
         self.last_error = error
 
-    def diagnostic_values(self, rate: float) -> tuple[int, str, list[tuple[str, str]]]:
+    def diagnostic_values(self, rate: float, now_ns: int | None = None
+                          ) -> tuple[int, str, list[tuple[str, str]]]:
         """Return the node's diagnostics for the state now.
 
         Args:
             rate: Pairs per second over the last diagnostics period (bag time).
+            now_ns: Bag time of the diagnostics, for the per-camera rates and ages (default:
+                the newest stamp received).
 
         Returns:
             ``(level, message, values)``: the DiagnosticStatus level (0 OK, 1 WARN, 2 ERROR),
@@ -308,6 +346,18 @@ class ReplaySession:
 
         """
         counters = self.counters
+        stamps = [s for s in self._last_stamp_ns.values() if s is not None]
+        now = now_ns if now_ns is not None else max(stamps, default=0)
+        span_s = (now - self._diag_ns) * 1e-9 if self._diag_ns is not None else 0.0
+        cameras = []
+        for side in ('left', 'right'):
+            new = self._received[side] - self._received_mark[side]
+            last = self._last_stamp_ns[side]
+            since = last if last is not None else (self._first_ns or now)
+            cameras.append((self.topics[side], self._received[side],
+                            new / span_s if span_s > 0 else rate, max(now - since, 0) * 1e-9))
+            self._received_mark[side] = self._received[side]
+        self._diag_ns = now
         warning, self.input_warning = self.input_warning, ''
         return plane_status(
             rate=rate, latencies_ms=self.latencies_ms[-_LATENCY_WINDOW:], pairs=counters.pairs,
@@ -320,7 +370,8 @@ class ReplaySession:
             last_error=self.last_error,
             input_counts=(self.pipeline.checks.counts, self.stamp_checks.counts,
                           self.decode_counts),
-            input_warning=warning)
+            input_warning=warning, cameras=cameras,
+            silence_s=self.config.transport.silence_s)
 
     def input_counts(self) -> dict[str, int]:
         """Return the input problems seen so far (names of ``health.INPUT_COUNTER_NAMES``)."""
@@ -343,6 +394,16 @@ class BagMessage(NamedTuple):
 def _describe_error(err: BaseException) -> str:
     text = str(err).strip().rstrip('.')
     return f'{type(err).__name__}: {text}' if text else type(err).__name__
+
+
+def _damage_hint(err: BaseException) -> str:
+    text = str(err)
+    if 'end magic' in text:
+        return (' (the MCAP file is truncated: it has no footer, as when a recording is killed; '
+                "'mcap recover' can rebuild it)")
+    if 'malformed' in text or 'not a database' in text:
+        return ' (the sqlite3 file is truncated or damaged)'
+    return ''
 
 
 def _storage_name(reader: Reader) -> str:
@@ -375,12 +436,17 @@ class BagInput:
             raise BagError(f'input bag {str(self.path)!r} does not exist')
         self.typestore = _typestore()
         self.undecodable: list[str] = []
+        if self.path.is_dir() and not (self.path / 'metadata.yaml').exists():
+            files = sorted(p.name for p in self.path.iterdir() if p.suffix in ('.db3', '.mcap'))
+            hint = (f'; to read its storage file alone, give {str(self.path / files[0])!r}'
+                    if files else '; it holds no .db3 or .mcap file either')
+            raise BagError(f'bag folder {str(self.path)!r} has no metadata.yaml' + hint)
         try:
             self._reader = Reader(self.path)
             self._reader.open()
         except Exception as err:  # noqa: B902 - rosbags raises many types on corrupt input
-            raise BagError(
-                f'cannot read bag {str(self.path)!r}: {_describe_error(err)}') from err
+            raise BagError(f'cannot read bag {str(self.path)!r}: {_describe_error(err)}'
+                           + _damage_hint(err)) from err
         try:
             self.storage = _storage_name(self._reader)
             topics = {name: info.msgtype for name, info in self._reader.topics.items()}
@@ -555,17 +621,22 @@ class BagOutput:
             status=[status])
         self._write(self._conn_diag, DIAGNOSTICS_TOPIC, stamp_ns, msg)
 
-    def commit(self) -> None:
-        """Close the bag and move it into place."""
+    def set_custom_data(self, key: str, value: str) -> None:
+        """Record a key/value string in the output bag's metadata.yaml ``custom_data``."""
+        self._writer.set_custom_data(key, value)
+
+    def commit(self, path: str | os.PathLike[str] | None = None) -> None:
+        """Close the bag and move it into place (to ``path`` instead, if given)."""
         self._writer.close()
         finished = self._tmpdir / self.path.name
-        if self.path.exists() or self.path.is_symlink():
+        target = Path(path) if path is not None else self.path
+        if target.exists() or target.is_symlink():
             if not self.replace:
-                raise BagError(f'output {str(self.path)!r} appeared while replaying; '
+                raise BagError(f'output {str(target)!r} appeared while replaying; '
                                f'the result is left in {str(finished)!r}')
             # Move the old one aside first, so the rename below is atomic.
-            os.replace(self.path, self._tmpdir / 'replaced')
-        os.replace(finished, self.path)
+            os.replace(target, self._tmpdir / 'replaced')
+        os.replace(finished, target)
         shutil.rmtree(self._tmpdir, ignore_errors=True)
 
     def abort(self) -> None:
@@ -612,13 +683,13 @@ class _CsvOutput:
         ])
         self.rows += 1
 
-    def commit(self) -> None:
+    def commit(self, path: Path | None = None) -> None:
         self._stream.close()
         # mkstemp makes the file private; give it the permissions open() would have.
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(self._tmp, 0o666 & ~umask)
-        os.replace(self._tmp, self.path)
+        os.replace(self._tmp, path if path is not None else self.path)
 
     def abort(self) -> None:
         self._stream.close()
@@ -734,17 +805,29 @@ class _DiagnosticsClock:
             # First pair, or the stamps went back (a bag loop): start a new period.
             self.start_ns, self.pairs = stamp_ns, 0
         else:
-            end = self.start_ns + self.period_ns
-            if stamp_ns >= end:
-                out.append((end, self.pairs / (self.period_ns * 1e-9)))
-                self.start_ns, self.pairs = end, 0
-                periods = (stamp_ns - end) // self.period_ns
-                if periods >= 1:
-                    end = self.start_ns + periods * self.period_ns
-                    out.append((end, 0.0))
-                    self.start_ns = end
+            out = self.tick(stamp_ns)
         self.pairs += 1
         self.last_ns = stamp_ns
+        return out
+
+    def tick(self, stamp_ns: int) -> list[tuple[int, float]]:
+        """Return ``(stamp, rate)`` of the periods that ended before a message at ``stamp_ns``.
+
+        Called for every image message, so that a camera drop-out (images on one side only)
+        gets a diagnostics message per period, as the node sends.
+        """
+        out: list[tuple[int, float]] = []
+        if self.start_ns is None or stamp_ns < self.start_ns:
+            return out
+        end = self.start_ns + self.period_ns
+        if stamp_ns >= end:
+            out.append((end, self.pairs / (self.period_ns * 1e-9)))
+            self.start_ns, self.pairs = end, 0
+            periods = (stamp_ns - end) // self.period_ns
+            if periods >= 1:
+                end = self.start_ns + periods * self.period_ns
+                out.append((end, 0.0))
+                self.start_ns = end
         return out
 
     def final(self) -> tuple[int, float] | None:
@@ -781,7 +864,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                right_topic: str = '/right/image_raw', storage: str | None = None,
                force: bool = False, csv_path: str | os.PathLike[str] | None = None,
                progress: bool = False,
-               on_frame: Callable[[ReplayedFrame], None] | None = None) -> ReplaySummary:
+               on_frame: Callable[[ReplayedFrame], None] | None = None,
+               strict: bool = False, keep_partial: bool = False) -> ReplaySummary:
     """Replay a bag through the pipeline and write the node's outputs to a new bag.
 
     Everything that can be checked up front is checked before anything is written.
@@ -797,12 +881,18 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
         csv_path: If given, write one CSV row per processed pair there.
         progress: Show a progress bar on stderr.
         on_frame: Called with every processed pair, after it is written.
+        strict: Fail (``BagReadError``, partial output removed) on the first message that
+            cannot be deserialised, instead of skipping and counting it.
+        keep_partial: On a read failure part-way, keep the output up to it as
+            ``OUTPUT_BAG.incomplete`` (and ``CSV.incomplete``), marked
+            ``plane_replay.complete: 'false'`` in its metadata, instead of removing it.
 
     Returns:
         The summary.
 
     Raises:
-        BagReadError: If reading fails part-way; the partial output is removed.
+        BagReadError: If reading fails part-way (or, with ``strict``, a message cannot be
+            deserialised); the partial output is removed (or kept, see ``keep_partial``).
         BagError: If the run is refused (missing or unreadable bag, unknown topic, existing
             output); nothing is written.
         ValueError: If ``storage`` is not one of the names in :data:`STORAGES`.
@@ -816,11 +906,19 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     if not input_path.exists():
         raise BagError(f'input bag {str(input_path)!r} does not exist')
     _check_paths(input_path, output_path, csv_file, force)
+    incomplete = output_path.with_name(output_path.name + '.incomplete')
+    csv_incomplete = (csv_file.with_name(csv_file.name + '.incomplete')
+                      if csv_file is not None else None)
+    if keep_partial and not force:
+        for path in (incomplete, csv_incomplete):
+            if path is not None and (path.exists() or path.is_symlink()):
+                raise BagError(f'{str(path)!r} exists (where --keep-partial would put a '
+                               'partial output); use --force to replace it')
     t_start = time.perf_counter()
     with BagInput(input_path, left_topic, right_topic) as bag:
         out_storage = storage or bag.storage
         summary = ReplaySummary(str(input_path), str(output_path), out_storage)
-        session = ReplaySession(config)
+        session = ReplaySession(config, (left_topic, right_topic))
         clock = _DiagnosticsClock(config.transport.diagnostics_period_s)
         output = BagOutput(output_path, out_storage, replace=force)
         table = _CsvOutput(csv_file) if csv_file is not None else None
@@ -828,9 +926,15 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
         try:
             n_undecodable = 0
             for item in bag.messages():
+                if strict and bag.undecodable:
+                    raise BagReadError(f'bag {str(input_path)!r}: {bag.undecodable[0]} '
+                                       '(--strict)')
                 while n_undecodable < len(bag.undecodable):
                     session.note_undecodable(bag.undecodable[n_undecodable])
                     n_undecodable += 1
+                for stamp_ns, rate in clock.tick(header_stamp_ns(item.msg)):
+                    output.write_diagnostics(stamp_ns,
+                                             *session.diagnostic_values(rate, stamp_ns))
                 if item.side == 'left':
                     summary.left_messages += 1
                     bar.update(1)
@@ -838,7 +942,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                     summary.right_messages += 1
                 for frame in session.add(item.side, item.msg):
                     for stamp_ns, rate in clock.due(frame.pair.left_stamp_ns):
-                        output.write_diagnostics(stamp_ns, *session.diagnostic_values(rate))
+                        output.write_diagnostics(stamp_ns,
+                                                 *session.diagnostic_values(rate, stamp_ns))
                     output.write_frame(frame)
                     if table is not None:
                         table.write(frame.result)
@@ -851,13 +956,39 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
             while n_undecodable < len(bag.undecodable):
                 session.note_undecodable(bag.undecodable[n_undecodable])
                 n_undecodable += 1
+            if strict and bag.undecodable:
+                raise BagReadError(f'bag {str(input_path)!r}: {bag.undecodable[0]} (--strict)')
             last = clock.final()
             if last is not None:
-                output.write_diagnostics(last[0], *session.diagnostic_values(last[1]))
+                output.write_diagnostics(last[0],
+                                         *session.diagnostic_values(last[1], last[0]))
+            output.set_custom_data('plane_replay.input_bag', str(input_path))
+            output.set_custom_data('plane_replay.skipped_messages',
+                                   str(len(bag.undecodable)))
+            output.set_custom_data('plane_replay.complete', 'true')
             bar.close()
             if table is not None:
                 table.commit()
             output.commit()
+        except BagReadError as err:
+            bar.close()
+            if not keep_partial:
+                output.abort()
+                if table is not None:
+                    table.abort()
+                raise
+            output.set_custom_data('plane_replay.input_bag', str(input_path))
+            output.set_custom_data('plane_replay.skipped_messages',
+                                   str(len(bag.undecodable)))
+            output.set_custom_data('plane_replay.complete', 'false')
+            output.set_custom_data('plane_replay.error', str(err))
+            output.commit(incomplete)
+            if table is not None:
+                table.commit(csv_incomplete)
+            kept = BagReadError(f'{err}; the output up to the failure is in '
+                                f'{str(incomplete)!r} (incomplete)')
+            kept.kept = str(incomplete)
+            raise kept from err
         except BaseException:
             bar.close()
             output.abort()
@@ -937,6 +1068,13 @@ def build_parser() -> argparse.ArgumentParser:
                         help='replace an existing OUTPUT_BAG (and --csv file)')
     parser.add_argument('--csv', metavar='FILE',
                         help='write one CSV row per processed pair to FILE')
+    parser.add_argument('--keep-partial', action='store_true',
+                        help='if reading fails part-way, keep the output up to the failure as '
+                             'OUTPUT_BAG.incomplete (marked incomplete in its metadata) '
+                             'instead of removing it')
+    parser.add_argument('--strict', action='store_true',
+                        help='fail (exit 1, output removed) on the first message that cannot '
+                             'be deserialised, instead of skipping it (exit 3)')
     bar = parser.add_mutually_exclusive_group()
     bar.add_argument('--no-progress', dest='progress', action='store_false', default=None,
                      help='no progress bar (the default when stderr is not a terminal)')
@@ -956,8 +1094,10 @@ def main(argv: list[str] | None = None) -> int:
         argv: Arguments without the program name (default: ``sys.argv[1:]``).
 
     Returns:
-        0 on success, 2 if the run was refused (nothing written), 1 if it failed part-way
-        (the partial output removed).
+        0 on success; 3 when the output is complete except for messages the bag could not
+        give (skipped, counted and named on stderr); 2 if the run was refused (nothing
+        written); 1 if it failed part-way (the partial output removed); 130 on Ctrl-C and
+        143 on SIGTERM (the partial output removed).
 
     """
     parser = build_parser()
@@ -973,13 +1113,18 @@ def main(argv: list[str] | None = None) -> int:
                else f'params file {args.params_file!r}: {err}')
         return EXIT_REFUSED
     progress = args.progress if args.progress is not None else sys.stderr.isatty()
+    installed, previous = _terminate_like_ctrl_c()
     try:
         summary = run_replay(args.input_bag, args.output_bag, config,
                              left_topic=args.left_topic, right_topic=args.right_topic,
                              storage=args.storage, force=args.force, csv_path=args.csv,
-                             progress=progress)
+                             progress=progress, strict=args.strict,
+                             keep_partial=args.keep_partial)
+    except Terminated:
+        _error('terminated (SIGTERM); the partial output was removed')
+        return EXIT_TERMINATED
     except BagReadError as err:
-        _error(f'{err}; the partial output was removed')
+        _error(str(err) if err.kept else f'{err}; the partial output was removed')
         return EXIT_FAILED
     except BagError as err:
         _error(str(err))
@@ -989,9 +1134,34 @@ def main(argv: list[str] | None = None) -> int:
         return EXIT_FAILED
     except KeyboardInterrupt:
         _error('interrupted; the partial output was removed')
-        return 130
+        return EXIT_INTERRUPTED
+    finally:
+        if installed:
+            signal.signal(signal.SIGTERM, previous)
     print('\n'.join(summary.lines()))
+    if summary.undecodable_messages:
+        print(f'{PROG}: warning: {summary.undecodable_messages} message(s) of '
+              f'{summary.input_bag!r} could not be read and were skipped (first: '
+              f'{summary.first_errors[0]}); {summary.output_bag!r} records the count in '
+              'metadata.yaml custom_data plane_replay.skipped_messages', file=sys.stderr)
+        return EXIT_SKIPPED
     return EXIT_OK
+
+
+def _terminate_like_ctrl_c() -> tuple[bool, Any]:
+    """Make SIGTERM raise :class:`Terminated` (main thread only).
+
+    Returns:
+        ``(installed, previous handler)``.
+
+    """
+    def on_sigterm(signum: int, frame: Any) -> None:
+        raise Terminated()
+
+    try:
+        return True, signal.signal(signal.SIGTERM, on_sigterm)
+    except ValueError:   # not the main thread: leave SIGTERM alone
+        return False, None
 
 
 if __name__ == '__main__':
