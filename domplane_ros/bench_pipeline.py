@@ -129,6 +129,7 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
     from sensor_msgs.msg import Image
 
     from domplane_ros.node import PlaneNode
+    from domplane_ros.ros_io import image_msg, stamped_header
 
     frames = scene_sequence(30, 11, width=640, height=480, floor='random')
     prior = _prior_for(frames[0])
@@ -150,22 +151,11 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
 
     driver.create_subscription(Image, 'plane/mask', on_mask, 50)
 
-    def make(gray: np.ndarray, now: float, frame_id: str) -> Image:
-        msg = Image()
-        msg.header.stamp.sec = int(now)
-        msg.header.stamp.nanosec = int((now - int(now)) * 1e9)
-        msg.header.frame_id = frame_id
-        msg.height, msg.width = gray.shape
-        msg.encoding = 'mono8'
-        msg.step = gray.shape[1]
-        msg.data = gray.tobytes()
-        return msg
-
     def tick() -> None:
         frame = frames[sent[0] % len(frames)]
-        now = time.time()
-        pub_l.publish(make(frame.left, now, 'left'))
-        pub_r.publish(make(frame.right, now, 'right'))
+        now_ns = time.time_ns()
+        pub_l.publish(image_msg(frame.left, stamped_header(now_ns, 'left'), 'mono8'))
+        pub_r.publish(image_msg(frame.right, stamped_header(now_ns, 'right'), 'mono8'))
         sent[0] += 1
 
     executor = SingleThreadedExecutor()

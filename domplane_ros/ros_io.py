@@ -68,6 +68,14 @@ def homography_msg(matrix: np.ndarray) -> Float64MultiArray:
     return msg
 
 
+def stamped_header(stamp_ns: int, frame_id: str) -> Header:
+    """Return a std_msgs/Header with a stamp given in nanoseconds and a frame id."""
+    header = Header()
+    header.stamp.sec, header.stamp.nanosec = divmod(int(stamp_ns), 1_000_000_000)
+    header.frame_id = frame_id
+    return header
+
+
 def image_msg(array: np.ndarray, header: Header, encoding: str) -> Image:
     """Return a sensor_msgs/Image of a mono8 (2-D) or rgb8 (3-D) uint8 array."""
     if encoding == 'mono8':

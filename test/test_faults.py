@@ -11,6 +11,7 @@ import time
 from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.homography import apply_homography
 from domplane_ros.node import PlaneNode
+from domplane_ros.ros_io import image_msg, stamped_header
 from domplane_ros.scene import random_scene
 import numpy as np
 import pytest
@@ -20,8 +21,13 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 from std_msgs.msg import Float64MultiArray
+from test_node import _prior_overrides
 
 RIGHT_TOPIC = '/right/image_raw'
+
+
+def _mono8(gray: np.ndarray, stamp_ns: int, frame_id: str):
+    return image_msg(gray, stamped_header(stamp_ns, frame_id), 'mono8')
 
 
 @pytest.fixture(scope='module')
@@ -32,29 +38,6 @@ def scene():
 @pytest.fixture(scope='module')
 def small_scene():
     return random_scene(7, width=320, height=240, floor='random', n_boxes=3)
-
-
-def _image(gray: np.ndarray, stamp_ns: int, frame_id: str) -> Image:
-    msg = Image()
-    msg.header.stamp.sec = stamp_ns // 1_000_000_000
-    msg.header.stamp.nanosec = stamp_ns % 1_000_000_000
-    msg.header.frame_id = frame_id
-    msg.height, msg.width = gray.shape
-    msg.encoding = 'mono8'
-    msg.step = gray.shape[1]
-    msg.data = gray.tobytes()
-    return msg
-
-
-def _prior(scene, *extra: Parameter) -> list[Parameter]:
-    s = scene.setup
-    return [
-        Parameter('prior.focal_px', value=[s.focal_px * 0.8, s.focal_px * 1.2]),
-        Parameter('prior.baseline_over_height',
-                  value=[s.baseline_over_height * 0.7, s.baseline_over_height * 1.3]),
-        Parameter('prior.tilt_deg', value=[s.tilt_deg - 8.0, s.tilt_deg + 8.0]),
-        Parameter('prior.vergence_deg', value=[s.vergence_deg - 2.0, s.vergence_deg + 2.0]),
-        *extra]
 
 
 def _transfer_error_px(h: np.ndarray, scene) -> float:
@@ -114,7 +97,7 @@ class Rig:
             stamp = time.time_ns() if stamp_ns is None else stamp_ns + sent * int(period * 1e9)
             for side in sides:
                 gray = scene.left if side == 'left' else scene.right
-                self.pubs[side].publish(_image(gray, stamp, f'{side}_cam'))
+                self.pubs[side].publish(_mono8(gray, stamp, f'{side}_cam'))
             sent += 1
             next_time = start + sent * period
             while time.monotonic() < next_time:
@@ -134,9 +117,9 @@ def _level(status) -> int:
 
 def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
     gap_s = 1.5
-    rig = Rig(ros_context, _prior(scene, Parameter('diagnostics.period_s', value=0.2),
-                                  Parameter('diagnostics.silence_s', value=0.5),
-                                  Parameter('pipeline.max_stamp_jump_s', value=1.0)))
+    rig = Rig(ros_context, _prior_overrides(scene, Parameter('diagnostics.period_s', value=0.2),
+                                            Parameter('diagnostics.silence_s', value=0.5),
+                                            Parameter('pipeline.max_stamp_jump_s', value=1.0)))
     processed_pairs = []
     real_process = rig.node._process
 
@@ -194,8 +177,9 @@ def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
 
 def test_100hz_load_keeps_queues_bounded_newest_wins_and_counts_drops(
         ros_context, small_scene):
-    rig = Rig(ros_context, _prior(small_scene, Parameter('diagnostics.period_s', value=0.5),
-                                  Parameter('sync.slop_s', value=0.004)))
+    rig = Rig(ros_context, _prior_overrides(small_scene,
+                                            Parameter('diagnostics.period_s', value=0.5),
+                                            Parameter('sync.slop_s', value=0.004)))
     node = rig.node
     processed_stamps: list[int] = []
     real_process = node.pipeline.process
@@ -216,7 +200,7 @@ def test_100hz_load_keeps_queues_bounded_newest_wins_and_counts_drops(
         while time.monotonic() - start < 5.0:
             last_stamp = time.time_ns()
             for side, gray in (('left', small_scene.left), ('right', small_scene.right)):
-                rig.pubs[side].publish(_image(gray, last_stamp, f'{side}_cam'))
+                rig.pubs[side].publish(_mono8(gray, last_stamp, f'{side}_cam'))
             sent += 1
             stats = node._sync.stats()
             max_queued = max(max_queued, stats.queued_left, stats.queued_right)

@@ -89,9 +89,10 @@ class Harness:
         self.driver.destroy_node()
 
 
-def _prior_overrides(scene):
+def _prior_overrides(scene, *extra: Parameter) -> list[Parameter]:
+    """Return prior ranges around the scene's set-up; ``extra`` overrides replace same names."""
     s = scene.setup
-    return [
+    base = [
         Parameter('prior.focal_px', value=[s.focal_px * 0.8, s.focal_px * 1.2]),
         Parameter('prior.baseline_over_height',
                   value=[s.baseline_over_height * 0.7, s.baseline_over_height * 1.3]),
@@ -99,6 +100,8 @@ def _prior_overrides(scene):
         Parameter('prior.vergence_deg', value=[s.vergence_deg - 2.0, s.vergence_deg + 2.0]),
         Parameter('diagnostics.period_s', value=0.2),
     ]
+    names = {p.name for p in extra}
+    return [p for p in base if p.name not in names] + list(extra)
 
 
 def test_node_publishes_homography_and_mask_matching_truth(ros_context, scene):

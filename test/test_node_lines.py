@@ -6,6 +6,7 @@ import time
 
 from domplane_ros.homography import apply_homography
 from domplane_ros.node import PlaneNode
+from domplane_ros.ros_io import image_msg, stamped_header
 from domplane_ros.scene import random_scene
 import numpy as np
 import pytest
@@ -15,23 +16,16 @@ from rclpy.parameter import Parameter
 from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 from std_msgs.msg import Float64MultiArray
+from test_node import _prior_overrides
+
+
+def _mono8(gray: np.ndarray, stamp_ns: int, frame_id: str):
+    return image_msg(gray, stamped_header(stamp_ns, frame_id), 'mono8')
 
 
 @pytest.fixture(scope='module')
 def tiles():
     return random_scene(0, floor='tiles_plain')
-
-
-def _image(gray: np.ndarray, stamp_ns: int, frame_id: str) -> Image:
-    msg = Image()
-    msg.header.stamp.sec = stamp_ns // 1_000_000_000
-    msg.header.stamp.nanosec = stamp_ns % 1_000_000_000
-    msg.header.frame_id = frame_id
-    msg.height, msg.width = gray.shape
-    msg.encoding = 'mono8'
-    msg.step = gray.shape[1]
-    msg.data = gray.tobytes()
-    return msg
 
 
 def _cyan(msg):
@@ -43,15 +37,7 @@ def _cyan(msg):
 
 @pytest.mark.parametrize('kind', ['lines', 'both'])
 def test_node_finds_low_texture_floor_with_lines(ros_context, tiles, kind):
-    s = tiles.setup
-    overrides = [
-        Parameter('features.kind', value=kind),
-        Parameter('prior.focal_px', value=[s.focal_px * 0.8, s.focal_px * 1.2]),
-        Parameter('prior.baseline_over_height',
-                  value=[s.baseline_over_height * 0.7, s.baseline_over_height * 1.3]),
-        Parameter('prior.tilt_deg', value=[s.tilt_deg - 8.0, s.tilt_deg + 8.0]),
-        Parameter('prior.vergence_deg', value=[s.vergence_deg - 2.0, s.vergence_deg + 2.0]),
-    ]
+    overrides = _prior_overrides(tiles, Parameter('features.kind', value=kind))
     node = PlaneNode(context=ros_context, parameter_overrides=overrides)
     driver = Node('lines_driver', context=ros_context)
     pub_left = driver.create_publisher(Image, 'left/image_raw', qos_profile_sensor_data)
@@ -75,8 +61,8 @@ def test_node_finds_low_texture_floor_with_lines(ros_context, tiles, kind):
 
         while time.monotonic() < deadline and not planed():
             if pub_left.get_subscription_count() and pub_right.get_subscription_count():
-                pub_left.publish(_image(tiles.left, stamp, 'left_cam'))
-                pub_right.publish(_image(tiles.right, stamp + 1000, 'right_cam'))
+                pub_left.publish(_mono8(tiles.left, stamp, 'left_cam'))
+                pub_right.publish(_mono8(tiles.right, stamp + 1000, 'right_cam'))
                 stamp += 100_000_000
             end = time.monotonic() + 0.3
             while time.monotonic() < end and not planed():
