@@ -49,4 +49,4 @@ bench: venv
 
 clean:
 	rm -rf $(VENV) domplane_ros.egg-info .pytest_cache .hypothesis demo_output \
-		bench_output eval_output
+		bench_output eval_output soak_output
