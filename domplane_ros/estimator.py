@@ -511,7 +511,7 @@ def _search_prior(state: _TwoStep, prior: PriorConfig, options: EstimatorConfig,
     best: PlaneEstimate | FailedEstimate | None = None
     for i in order:
         result = _estimate_from(state, candidates[i], options)
-        if best is None or _better(result, best):
+        if best is None or better_estimate(result, best):
             best = result
     assert best is not None
     if isinstance(best, PlaneEstimate):
@@ -519,7 +519,13 @@ def _search_prior(state: _TwoStep, prior: PriorConfig, options: EstimatorConfig,
     return best
 
 
-def _better(a: PlaneEstimate | FailedEstimate, b: PlaneEstimate | FailedEstimate) -> bool:
+def better_estimate(a: PlaneEstimate | FailedEstimate,
+                    b: PlaneEstimate | FailedEstimate) -> bool:
+    """Return True if ``a`` is a better search result than ``b`` (same features).
+
+    A success beats a failure; of two failures, more inliers; of two successes, the lower
+    final energy.
+    """
     if a.ok != b.ok:
         return bool(a.ok)
     if not a.ok:

@@ -437,7 +437,8 @@ class Case:
     info: dict[str, Any] = field(default_factory=dict)
 
 
-def _gray(path: Path) -> np.ndarray:
+def read_gray(path: Path) -> np.ndarray:
+    """Return an image file as (H, W) uint8 grey; ValueError if it cannot be read."""
     image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
     if image is None:
         raise ValueError(f'cannot read image {path}')
@@ -509,8 +510,8 @@ def evaluate_kitti(folder: Path, repeats: int = 3, full_image: bool = True) -> l
         The ``kitti`` case (prior and ROI), then the ``kitti_full_image`` case if asked for.
 
     """
-    left = _gray(folder / 'left.png')
-    right = _gray(folder / 'right.png')
+    left = read_gray(folder / 'left.png')
+    right = read_gray(folder / 'right.png')
     ref = kitti_reference(folder)
     cases = [_kitti_case('kitti', left, right, ref, kitti_config(), repeats)]
     if full_image:
@@ -558,9 +559,9 @@ def evaluate_chessboards(folder: Path, repeats: int = 3) -> list[Case]:
     """Evaluate both methods on the chessboard pairs (see the module docstring)."""
     config = PlaneNodeConfig(prior=CHESSBOARD_PRIOR)
     cases = []
-    for number in _progress(chessboard_pairs(folder), 'chessboards'):
-        left = _gray(folder / f'left{number}.jpg')
-        right = _gray(folder / f'right{number}.jpg')
+    for number in progress(chessboard_pairs(folder), 'chessboards'):
+        left = read_gray(folder / f'left{number}.jpg')
+        right = read_gray(folder / f'right{number}.jpg')
         corners = chessboard_corners(left, right)
         if corners is None:
             print(f'chessboard pair {number}: board not found in both images, skipped',
@@ -614,16 +615,16 @@ def evaluate_qualitative(name: str, pair: str, left: np.ndarray, right: np.ndarr
 
 def evaluate_books(folder: Path, repeats: int = 3) -> list[Case]:
     """Evaluate the books pair (``left.jpg``, ``right.jpg``) qualitatively."""
-    left = _gray(folder / 'left.jpg')
-    right = _gray(folder / 'right.jpg')
+    left = read_gray(folder / 'left.jpg')
+    right = read_gray(folder / 'right.jpg')
     return [evaluate_qualitative('books', 'left/right.jpg', left, right,
                                  PlaneNodeConfig(prior=BOOKS_PRIOR), repeats)]
 
 
 def evaluate_ensenso(folder: Path, repeats: int = 3) -> list[Case]:
     """Evaluate the Ensenso projector-textured surface qualitatively."""
-    left = _gray(folder / f'{ENSENSO_STEM}_left.png')
-    right = _gray(folder / f'{ENSENSO_STEM}_right.png')
+    left = read_gray(folder / f'{ENSENSO_STEM}_left.png')
+    right = read_gray(folder / f'{ENSENSO_STEM}_right.png')
     return [evaluate_qualitative('ensenso', 'fit_primitive', left, right,
                                  PlaneNodeConfig(prior=ENSENSO_PRIOR), repeats)]
 
@@ -640,7 +641,7 @@ def evaluate_rendered(n_scenes: int, first_seed: int = 0, repeats: int = 1) -> l
     """
     config = PlaneNodeConfig(prior=RENDERED_PRIOR)
     cases = []
-    for seed in _progress(range(first_seed, first_seed + n_scenes), 'rendered scenes'):
+    for seed in progress(range(first_seed, first_seed + n_scenes), 'rendered scenes'):
         frame = random_scene(seed)
         runs = _both(frame.left, frame.right, config, repeats)
         cases.append(Case('rendered', str(seed), frame.left, runs,
@@ -662,7 +663,7 @@ def evaluate_streams(n_sequences: int, n_frames: int = 10, first_seed: int = 0
     """
     config = one_shot_search(PlaneNodeConfig(prior=RENDERED_PRIOR))
     cases = []
-    for seed in _progress(range(first_seed, first_seed + n_sequences), 'rendered sequences'):
+    for seed in progress(range(first_seed, first_seed + n_sequences), 'rendered sequences'):
         pipeline = PlanePipeline(config)
         for index, frame in enumerate(scene_sequence(n_frames, seed)):
             start = time.perf_counter()
@@ -712,7 +713,8 @@ def _rendered_info(frame: StereoFrame) -> dict[str, Any]:
 # Output.
 
 
-def _progress(items: Iterable, desc: str) -> Iterable:
+def progress(items: Iterable, desc: str) -> Iterable:
+    """Return ``items`` wrapped in a tqdm progress bar on stderr (a list without tqdm)."""
     items = list(items)
     try:
         from tqdm import tqdm

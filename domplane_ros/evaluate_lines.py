@@ -45,9 +45,8 @@ from domplane_ros.config import FeatureConfig, PlaneNodeConfig  # noqa: E402
 from domplane_ros.evaluate import (chessboard_corners, chessboard_pairs,  # noqa: E402
                                    CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX, default_data_dir,
                                    KITTI_DIR, KITTI_PRIOR, kitti_reference, KITTI_ROI,
-                                   mean_transfer_px, one_shot_search, OPENCV_DIR,
-                                   RENDERED_PRIOR,
-                                   run_orb_magsac, SOLVED_PX)
+                                   mean_transfer_px, one_shot_search, OPENCV_DIR, progress,
+                                   read_gray, RENDERED_PRIOR, run_orb_magsac, SOLVED_PX)
 from domplane_ros.homography import apply_homography  # noqa: E402
 from domplane_ros.mask import overlay  # noqa: E402
 from domplane_ros.pipeline import debug_overlay, FrameResult, PlanePipeline  # noqa: E402
@@ -146,7 +145,7 @@ def evaluate_rendered(n_scenes: int, classes: Sequence[str] = RENDERED_CLASSES,
     jobs = [(kind, seed) for kind in classes
             for seed in range(first_seed, first_seed + n_scenes)]
     cases = []
-    for kind, seed in _progress(jobs, 'rendered scenes'):
+    for kind, seed in progress(jobs, 'rendered scenes'):
         frame = random_scene(seed, floor=kind)
         truth = frame.plane_left & frame.visible_in_right
         sub = np.zeros_like(truth)
@@ -165,8 +164,8 @@ def evaluate_real(data: Path) -> list[LineCase]:
     cases = []
     kitti = data / KITTI_DIR
     if kitti.is_dir():
-        left = _gray(kitti / 'left.png')
-        right = _gray(kitti / 'right.png')
+        left = read_gray(kitti / 'left.png')
+        right = read_gray(kitti / 'right.png')
         ref = kitti_reference(kitti)
         ys, xs = np.nonzero(ref.road)
         points = np.stack([xs, ys], axis=1).astype(np.float64)
@@ -177,31 +176,15 @@ def evaluate_real(data: Path) -> list[LineCase]:
     boards = data / OPENCV_DIR
     if boards.is_dir():
         config = PlaneNodeConfig(prior=CHESSBOARD_PRIOR)
-        for number in _progress(chessboard_pairs(boards), 'chessboards'):
-            left = _gray(boards / f'left{number}.jpg')
-            right = _gray(boards / f'right{number}.jpg')
+        for number in progress(chessboard_pairs(boards), 'chessboards'):
+            left = read_gray(boards / f'left{number}.jpg')
+            right = read_gray(boards / f'right{number}.jpg')
             corners = chessboard_corners(left, right)
             if corners is None:
                 continue
             case = LineCase('chessboards', number, left, solved_px=CHESSBOARD_TARGET_PX)
             cases.append(run_methods(case, left, right, config, corners[0], corners[1]))
     return cases
-
-
-def _gray(path: Path) -> np.ndarray:
-    image = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if image is None:
-        raise ValueError(f'cannot read image {path}')
-    return image
-
-
-def _progress(items: Sequence, desc: str) -> Sequence:
-    items = list(items)
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover - tqdm is in requirements.txt
-        return items
-    return tqdm(items, desc=desc, file=sys.stderr, leave=False, disable=None)
 
 
 # --------------------------------------------------------------------------------------------

@@ -225,33 +225,13 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
             cv2.copyTo(tinted, region, rgb)
     for name, segments, colour in (('inlier_lines', inlier_lines, _INLIER_RGB),
                                    ('outlier_lines', outlier_lines, _OUTLIER_RGB)):
-        if segments is None:
-            continue
-        seg = np.asarray(segments, dtype=np.float64)
-        if seg.size == 0:
-            continue
-        if seg.ndim != 2 or seg.shape[1] != 4:
-            raise ValueError(f'{name} must have shape (N, 4), got {seg.shape}')
-        seg = seg[np.all(np.isfinite(seg), axis=1)]
-        fixed = np.clip(np.rint(seg * 16).astype(np.int64), -(2 ** 24), 2 ** 24)
-        for x1, y1, x2, y2 in fixed:
+        for x1, y1, x2, y2 in _fixed_point_rows(name, segments, 4):
             cv2.line(rgb, (int(x1), int(y1)), (int(x2), int(y2)), colour, 1, cv2.LINE_AA,
                      shift=4)
     radius = max(2, int(round(min(gray.shape) / 160)))
     for name, points, colour in (('inliers', inliers, _INLIER_RGB),
                                  ('outliers', outliers, _OUTLIER_RGB)):
-        if points is None:
-            continue
-        pts = np.asarray(points, dtype=np.float64)
-        if pts.size == 0:
-            continue
-        if pts.ndim != 2 or pts.shape[1] != 2:
-            raise ValueError(f'{name} must have shape (N, 2), got {pts.shape}')
-        pts = pts[np.all(np.isfinite(pts), axis=1)]
-        # Sub-pixel drawing: 4 fractional bits.
-        fixed = np.rint(pts * 16).astype(np.int64)
-        fixed = np.clip(fixed, -(2 ** 24), 2 ** 24)
-        for x, y in fixed:
+        for x, y in _fixed_point_rows(name, points, 2):
             centre = (int(x), int(y))
             if name == 'inliers':
                 cv2.circle(rgb, centre, radius * 16, colour, 1, cv2.LINE_AA, shift=4)
@@ -261,6 +241,24 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
                              (int(x + dx * radius * 16), int(y + dy * radius * 16)), colour,
                              1, cv2.LINE_AA, shift=4)
     return rgb
+
+
+def _fixed_point_rows(name: str, rows: np.ndarray | None, columns: int) -> np.ndarray:
+    """Return finite (N, columns) drawing coordinates with 4 fractional bits (cv2 ``shift=4``).
+
+    Raises:
+        ValueError: If ``rows`` is not empty and not of shape (N, columns).
+
+    """
+    if rows is None:
+        return np.zeros((0, columns), np.int64)
+    arr = np.asarray(rows, dtype=np.float64)
+    if arr.size == 0:
+        return np.zeros((0, columns), np.int64)
+    if arr.ndim != 2 or arr.shape[1] != columns:
+        raise ValueError(f'{name} must have shape (N, {columns}), got {arr.shape}')
+    arr = arr[np.all(np.isfinite(arr), axis=1)]
+    return np.clip(np.rint(arr * 16).astype(np.int64), -(2 ** 24), 2 ** 24)
 
 
 def mask_scores(mask: np.ndarray, plane_truth: np.ndarray, obstacle_truth: np.ndarray,

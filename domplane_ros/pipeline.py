@@ -12,8 +12,8 @@ import math
 import time
 
 from domplane_ros.config import PlaneNodeConfig, PriorConfig
-from domplane_ros.estimator import (estimate_plane, FailedEstimate, PlaneEstimate,
-                                    prior_screening)
+from domplane_ros.estimator import (better_estimate, estimate_plane, FailedEstimate,
+                                    PlaneEstimate, prior_screening)
 from domplane_ros.features import detect_corners, roi_to_pixels
 from domplane_ros.health import homography_problem, inlier_spread, PairChecks, texture_note
 from domplane_ros.homography import apply_homography
@@ -459,7 +459,7 @@ class PlanePipeline:
             if problem:
                 rejection = problem
                 continue
-            if best is None or _better(result, best):
+            if best is None or better_estimate(result, best):
                 best = result
         self.stats.candidates += step.candidates
         step.warm_start = 'search'
@@ -590,15 +590,6 @@ class _Step:
     candidates: int = 0
     reinitialised: bool = False
     keep_previous: bool = False
-
-
-def _better(a: PlaneEstimate | FailedEstimate, b: PlaneEstimate | FailedEstimate) -> bool:
-    """Return True if ``a`` is a better search result than ``b`` (same points)."""
-    if a.ok != b.ok:
-        return bool(a.ok)
-    if not a.ok:
-        return a.n_inliers > b.n_inliers
-    return a.final_energy < b.final_energy
 
 
 def debug_overlay(left: np.ndarray, result: FrameResult) -> np.ndarray:
