@@ -41,11 +41,11 @@ lint: venv
 	$(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) test/test_flake8.py test/test_pep257.py
 
 demo: venv
-	$(VPY) -m domplane_ros.demo --output demo_output
+	$(VPY) -m domplane_ros.tools.demo --output demo_output
 
 bench: venv
-	$(VPY) -m domplane_ros.bench
-	$(VPY) -m domplane_ros.bench_pipeline
+	$(VPY) -m domplane_ros.tools.bench
+	$(VPY) -m domplane_ros.tools.bench_pipeline
 
 clean:
 	rm -rf $(VENV) domplane_ros.egg-info .pytest_cache .hypothesis demo_output \

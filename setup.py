@@ -2,14 +2,14 @@
 
 from glob import glob
 
-from setuptools import setup
+from setuptools import find_packages, setup
 
 PACKAGE_NAME = 'domplane_ros'
 
 setup(
     name=PACKAGE_NAME,
     version='0.1.0',
-    packages=[PACKAGE_NAME],
+    packages=find_packages(include=[PACKAGE_NAME, PACKAGE_NAME + '.*']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + PACKAGE_NAME]),
         ('share/' + PACKAGE_NAME, ['package.xml']),
@@ -33,8 +33,8 @@ setup(
     extras_require={'test': ['pytest', 'hypothesis']},
     entry_points={
         'console_scripts': [
-            'plane_node = domplane_ros.node:main',
-            'plane_replay = domplane_ros.replay:main',
+            'plane_node = domplane_ros.ros.node:main',
+            'plane_replay = domplane_ros.replay.cli:main',
         ],
     },
 )

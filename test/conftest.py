@@ -1,58 +1,16 @@
-"""Shared pytest fixtures.
+"""Fixtures shared by every test tier; nothing here imports rclpy.
 
-``ros_context`` gives each test a private, initialised ``rclpy`` context, so node tests run
-in-process without touching the global context. DDS discovery is kept on loopback and every
-test session picks its own random domain, so test runs on the same machine do not see each
-other's nodes.
+The ROS tests' own fixtures (private rclpy contexts) live in ``test/ros/conftest.py``, so the
+core, stream, replay, sim and tools tests run where rclpy is not installed.
 """
 
 from __future__ import annotations
 
-import os
-import random
-from typing import Iterator
-
+from bag_helpers import make_frames
 import pytest
-import rclpy
-from rclpy.context import Context
-
-# Jazzy's replacement for ROS_LOCALHOST_ONLY (which it still honours, with a warning).
-os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-
-_SESSION_DOMAIN_ID = random.SystemRandom().randint(1, 200)
 
 
-@pytest.fixture(scope='session')
-def ros_domain_id() -> int:
-    """Return the DDS domain id that this test session's private contexts use.
-
-    Returns:
-        A random domain id in [1, 200], fixed for the session.
-
-    """
-    return _SESSION_DOMAIN_ID
-
-
-@pytest.fixture
-def ros_context(ros_domain_id: int) -> Iterator[object]:
-    """Yield a private, initialised ``rclpy.context.Context``; shut it down afterwards.
-
-    Create nodes with ``rclpy.create_node(name, context=ros_context)`` (or ``Node(...,
-    context=ros_context)``) and spin them with an executor made with
-    ``context=ros_context``. Nodes left over are destroyed by the context's shutdown.
-
-    Args:
-        ros_domain_id: The session's DDS domain id (fixture).
-
-    Yields:
-        The initialised context.
-
-    """
-    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
-    context = Context()
-    rclpy.init(context=context, domain_id=ros_domain_id)
-    try:
-        yield context
-    finally:
-        if context.ok():
-            rclpy.shutdown(context=context)
+@pytest.fixture(scope='module')
+def frames():
+    """Return the short rendered sequence that the bag tests write and replay."""
+    return make_frames()

@@ -1,0 +1,533 @@
+"""The two-step iteration of Fornland & Schnörr, with Cohen's auxiliary variables.
+
+Given left points ``p_i`` and right points ``Q`` (no correspondences), the iteration
+alternates
+
+* the local step: predict ``x_i = H(p_i)``, find the closest right point ``c_i`` (one
+  cKDTree per right set), and place the auxiliary point ``a_i`` on the segment ``[x_i, c_i]``
+  by the potential's rule;
+* the global step: re-fit ``H`` to the pairs ``(p_i, a_i)`` by minimising the Euclidean
+  energy ``1/2 sum ||H(p_i) - a_i||^2`` (Gauss-Newton in Hartley-normalised coordinates, every
+  accepted step lowers it).
+
+Both steps lower the joint energy ``E(H, a)`` (see :mod:`domplane_ros.core.potentials`), so the
+recorded sequence is non-increasing for every potential. A step check keeps this true even
+where the auxiliary rule is numerical (Geman-McClure): each point keeps its previous auxiliary
+point if that is cheaper under the new ``H``. With graduated non-convexity the energy changes
+with the scale, so monotonicity holds within each stage (``stage_trace`` says which).
+
+After convergence, a Euclidean refinement fits ``H`` to the inliers' closest points.
+
+Line segments (:mod:`domplane_ros.core.lines`) enter the same iteration: a left segment's two
+endpoints are predicted by ``H``, its closest right line is the one nearest in the pixel
+distance ``D = sqrt(d(x1)^2 + d(x2)^2)`` of the predicted endpoints to that (infinite) line,
+and its auxiliary variables are two points, the predicted endpoints moved toward their
+projections onto that line by the potential's rule (``s = step(D)``). The global step is the
+same weighted least-squares fit from left points and endpoints to their auxiliary points. With
+points and lines together the energy is ``sum over points + line_weight * sum over segments``,
+and every step lowers it, so the same monotonicity holds.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from domplane_ros.config import EstimatorConfig, PriorConfig
+from domplane_ros.core.homography import (apply_homography, as_homography, as_points,
+                                          check_homography, count_distinct, FailedEstimation,
+                                          normalise_scale, NormalisedRefiner)
+from domplane_ros.core.lines import (as_segments, endpoints, LineMatcher, lines_reason,
+                                     screen_line_candidates, segment_lengths)
+from domplane_ros.core.potentials import make_potential, Potential
+from domplane_ros.core.prior import prior_candidates, screen_candidates
+import numpy as np
+from scipy.spatial import cKDTree
+
+_GLOBAL_STEP_ITERATIONS = 2
+_POLISH_ROUNDS = 2
+_POLISH_STEPS = 2
+_LINE_POLISH_ROUNDS = 12
+_LINE_POLISH_TOLERANCE_PX = 1e-3
+OVER_RELAXATION = 0.5
+
+
+@dataclass(frozen=True)
+class PlaneEstimate:
+    """A successful dominant-plane estimate.
+
+    Attributes:
+        homography: (3, 3) float64, left pixel to right pixel, ``H[2, 2] == 1``.
+        inliers: (N,) bool, left points on the plane (a right point within the threshold).
+        matches: (N,) int64, index of each left point's closest right point.
+        residuals_px: (N,) float64 final distance from each prediction to its closest point.
+        iterations: Two-step iterations used, over all stages.
+        energy_trace: (K,) float64 joint energy after every local step.
+        stage_trace: (K,) int64 graduated non-convexity stage of each energy value.
+        converged: Whether the last stage met a tolerance before the iteration cap.
+        final_energy: Last value of the energy trace.
+        potential: Name of the potential used.
+        candidates_tried: Prior candidates that got the full iteration (0 for a warm start).
+        line_inliers: (K,) bool, left segments on the plane (a right line within the
+            threshold); empty without lines.
+        line_matches: (K,) int64, index of each left segment's closest right segment.
+        line_residuals_px: (K,) float64 final distance of each predicted segment to its
+            closest right line (:mod:`domplane_ros.core.lines`).
+        left_lines: (K, 4) float64 the left segments used (zero-length ones dropped).
+
+    """
+
+    homography: np.ndarray
+    inliers: np.ndarray
+    matches: np.ndarray
+    residuals_px: np.ndarray
+    iterations: int
+    energy_trace: np.ndarray
+    stage_trace: np.ndarray
+    converged: bool
+    final_energy: float
+    potential: str
+    candidates_tried: int = 0
+    line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
+    line_matches: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    line_residuals_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    ok: bool = field(default=True, init=False)
+    reason: str = field(default='', init=False)
+
+    @property
+    def n_inliers(self) -> int:
+        """Return the number of inlier left features (points plus segments)."""
+        return int(np.count_nonzero(self.inliers)) + int(np.count_nonzero(self.line_inliers))
+
+    def __bool__(self) -> bool:
+        """Return True: this is a success."""
+        return True
+
+
+@dataclass(frozen=True)
+class FailedEstimate(FailedEstimation):
+    """A failed estimate: the reason, and what the iteration got to, if it ran."""
+
+    iterations: int = 0
+    energy_trace: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    n_inliers: int = 0
+    stage_trace: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    ok: bool = field(default=False, init=False)
+
+
+def _options(options: EstimatorConfig | None, overrides: dict[str, Any]) -> EstimatorConfig:
+    base = options if options is not None else EstimatorConfig()
+    return replace(base, **overrides) if overrides else base
+
+
+def gnc_scales(options: EstimatorConfig) -> list[float]:
+    """Return the scales (pixels) of the stages: one for most potentials, several for GNC.
+
+    Args:
+        options: Estimator settings.
+
+    Returns:
+        Decreasing scales ending at ``options.threshold_px``.
+
+    """
+    if options.potential != 'geman_mcclure' or options.gnc_start_px <= options.threshold_px:
+        return [options.threshold_px]
+    scales = []
+    s = options.gnc_start_px
+    while s > options.threshold_px * 1.0001:
+        scales.append(s)
+        s *= options.gnc_factor
+    scales.append(options.threshold_px)
+    return scales
+
+
+class _TwoStep:
+    """State of one run: the features, the right search structures and the refiner.
+
+    The global step works on *rows*: one row per left point and two per left segment (its
+    endpoints). A feature's share of the energy is the weighted sum over its rows, so points
+    and lines enter one joint energy ``sum_f w_f (1/2 ||H(p_f) - a_f||^2 + P(d(a_f)))`` with
+    ``w = 1`` for points and ``line_weight`` for segments (``||.||`` over the feature's rows).
+    """
+
+    def __init__(self, left: np.ndarray, right: np.ndarray, tree: cKDTree | None,
+                 left_segments: np.ndarray | None = None,
+                 matcher: LineMatcher | None = None, line_weight: float = 1.0) -> None:
+        self.left = left
+        self.right = right
+        self.tree = tree
+        self.n_points = left.shape[0]
+        self.matcher = matcher
+        self.left_segments = (left_segments if left_segments is not None and matcher is not None
+                              else np.zeros((0, 4)))
+        self.n_lines = self.left_segments.shape[0]
+        self.line_weight = float(line_weight)
+        self.src = np.concatenate([left, endpoints(self.left_segments)])
+        frame = [right] + ([endpoints(matcher.segments)] if matcher is not None else [])
+        self.refiner = NormalisedRefiner(self.src, np.concatenate(frame))
+        self.row_feature = np.concatenate([np.arange(self.n_points), np.repeat(
+            np.arange(self.n_points, self.n_points + self.n_lines), 2)])
+        self.feature_weight = np.concatenate([np.ones(self.n_points),
+                                              np.full(self.n_lines, self.line_weight)])
+        self.row_weight = (None if self.n_lines == 0 or self.line_weight == 1.0
+                           else self.feature_weight[self.row_feature])
+
+    @property
+    def n_features(self) -> int:
+        """Return the number of features (points plus segments)."""
+        return self.n_points + self.n_lines
+
+    def apply(self, h: np.ndarray) -> np.ndarray:
+        """Return the (rows, 2) predictions of every row under ``h``."""
+        return apply_homography(h, self.src)
+
+    def match(self, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return per-feature closest distances and indices, and per-row closest positions.
+
+        The closest position of a point row is its closest right point, of a segment's
+        endpoint row its projection onto the segment's closest right line.
+        """
+        n = self.n_points
+        r = np.zeros(self.n_features)
+        idx = np.zeros(self.n_features, np.int64)
+        closest = np.empty_like(pred)
+        if n:
+            r[:n], idx[:n] = self.tree.query(pred[:n])
+            closest[:n] = self.right[idx[:n]]
+        if self.n_lines:
+            d, li, c1, c2 = self.matcher.closest(pred[n::2], pred[n + 1::2])
+            r[n:], idx[n:] = d, li
+            closest[n::2] = c1
+            closest[n + 1::2] = c2
+        return r, idx, closest
+
+    def local_step(self, pred: np.ndarray, potential: Potential
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
+                              np.ndarray]:
+        """Return closest distances, indices, aux rows, penalties, weighted terms, closest rows.
+
+        Distances, indices, penalties and terms are per feature; aux and closest per row.
+        """
+        r, idx, closest = self.match(pred)
+        s = potential.step(r)
+        frac = np.divide(s, r, out=np.zeros_like(r), where=r > 0)
+        aux = pred + (closest - pred) * frac[self.row_feature, None]
+        penalty = potential.penalty(r - s)
+        terms = self.feature_weight * (0.5 * s * s + penalty)
+        return r, idx, aux, penalty, terms, closest
+
+    def run_stage(self, h: np.ndarray, potential: Potential, options: EstimatorConfig,
+                  energies: list[float]) -> tuple[np.ndarray, int, bool, tuple]:
+        """Iterate one stage from ``h``; append energies.
+
+        Returns:
+            ``(H, iterations, converged, (pred, r, idx, closest))`` with the predictions of
+            the final ``H``, their closest distances and indices, and closest positions.
+
+        """
+        pred = self.apply(h)
+        r, idx, aux, penalty, terms, closest = self.local_step(pred, potential)
+        energy = float(np.sum(terms))
+        energies.append(energy)
+        weights = self.row_weight
+        for it in range(1, options.max_iterations + 1):
+            h_new, e_before, _ = self.refiner.refine(h, aux, weights, _GLOBAL_STEP_ITERATIONS)
+            if OVER_RELAXATION > 0:
+                ext = self.refiner.extrapolate(h, h_new, aux, OVER_RELAXATION, e_before,
+                                               weights)
+                if ext is not None:
+                    h_new = ext[0]
+            pred_new = self.apply(h_new)
+            r, idx, aux_new, pen_new, terms_new, closest = self.local_step(pred_new, potential)
+            # Step check: keep a previous auxiliary variable where it is cheaper under the
+            # new H (per feature: a segment keeps both auxiliary endpoints or neither).
+            diff = pred_new - aux
+            sq = np.bincount(self.row_feature, weights=np.einsum('ij,ij->i', diff, diff),
+                             minlength=self.n_features)
+            old_terms = self.feature_weight * (0.5 * sq + penalty)
+            keep_old = old_terms < terms_new
+            if np.any(keep_old):
+                keep_rows = keep_old[self.row_feature]
+                aux_new[keep_rows] = aux[keep_rows]
+                pen_new[keep_old] = penalty[keep_old]
+                terms_new = np.where(keep_old, old_terms, terms_new)
+            energy_new = float(np.sum(terms_new))
+            move = float(np.max(np.abs(pred_new - pred))) if pred.size else 0.0
+            energies.append(energy_new)
+            decrease = energy - energy_new
+            h, pred, aux, penalty, energy = h_new, pred_new, aux_new, pen_new, energy_new
+            if move < options.tolerance_px or decrease <= options.energy_tolerance * max(
+                    energy, 1e-300):
+                return h, it, True, (pred, r, idx, closest)
+        return h, options.max_iterations, False, (pred, r, idx, closest)
+
+    def polish(self, h: np.ndarray, threshold_px: float, matched: tuple
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Euclidean refinement: fit H to the inliers' closest positions, re-match, repeat.
+
+        For segments the closest positions are the endpoints' projections onto the matched
+        lines, so this minimises the point-to-line distances of the inlier segments.
+
+        Args:
+            h: (3, 3) float64 converged homography.
+            threshold_px: Inlier threshold.
+            matched: ``(pred, r, idx, closest)`` of ``h`` from the last local step.
+
+        Returns:
+            The refined H, and the per-feature closest distances and indices of its
+            predictions.
+
+        """
+        pred, r, idx, closest = matched
+        # With segments the targets (projections onto the matched lines) move with H, so the
+        # refit is repeated until the predictions settle, not only until the matches do.
+        rounds = _POLISH_ROUNDS if self.n_lines == 0 else _LINE_POLISH_ROUNDS
+        for _ in range(rounds):
+            inl = r < threshold_px
+            if np.count_nonzero(inl) < 8:
+                break
+            inl_rows = inl[self.row_feature]
+            target = np.where(inl_rows[:, None], closest, pred)
+            weights = inl_rows.astype(np.float64)
+            if self.row_weight is not None:
+                weights = weights * self.row_weight
+            h_new, _, _ = self.refiner.refine(h, target, weights, _POLISH_STEPS)
+            if check_homography(h_new):
+                break
+            pred_new = self.apply(h_new)
+            r_new, idx_new, closest_new = self.match(pred_new)
+            same = np.array_equal(idx_new[inl], idx[inl]) and np.array_equal(
+                r_new < threshold_px, inl)
+            settled = float(np.max(np.abs(pred_new - pred))) < _LINE_POLISH_TOLERANCE_PX
+            h, pred, r, idx, closest = h_new, pred_new, r_new, idx_new, closest_new
+            if same and (self.n_lines == 0 or settled):
+                break
+        return h, r, idx
+
+
+def _points_reason(left: np.ndarray, right: np.ndarray) -> str:
+    if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
+        return 'points have non-finite coordinates'
+    for pts, side in ((left, 'left'), (right, 'right')):
+        if pts.shape[0] < 4:
+            return f'need at least 4 {side} points, got {pts.shape[0]}'
+        if count_distinct(pts, 4) < 4:
+            return f'fewer than 4 distinct {side} points'
+        centred = pts - pts.mean(axis=0)
+        sv = np.linalg.svd(centred, compute_uv=False)
+        if sv[1] <= 1e-6 * max(sv[0], 1e-300):
+            return f'{side} points are collinear'
+    return ''
+
+
+def _check_inputs(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray, str]:
+    left = as_points(left, 'left_points')
+    right = as_points(right, 'right_points')
+    return left, right, _points_reason(left, right)
+
+
+def _build_state(left_points: Any, right_points: Any, left_lines: Any, right_lines: Any,
+                 line_weight: float) -> _TwoStep | str:
+    """Validate the features and build the run state, or return why they cannot fix H.
+
+    Points alone must be 4 or more, distinct and not collinear in each image; lines alone 4
+    or more and not one pencil (all concurrent or parallel). With both, a feature kind that
+    cannot fix H on its own is left out, and the estimate fails only if neither can.
+    """
+    use_lines = left_lines is not None or right_lines is not None
+    left = as_points(np.zeros((0, 2)) if left_points is None and use_lines else left_points,
+                     'left_points')
+    right = as_points(np.zeros((0, 2)) if right_points is None and use_lines
+                      else right_points, 'right_points')
+    if not use_lines:
+        reason = _points_reason(left, right)
+        return reason or _TwoStep(left, right, cKDTree(right))
+    left_seg = as_segments(np.zeros((0, 4)) if left_lines is None else left_lines,
+                           'left_lines')
+    right_seg = as_segments(np.zeros((0, 4)) if right_lines is None else right_lines,
+                            'right_lines')
+    if left.shape[0] == 0 and right.shape[0] == 0:
+        point_reason = 'no points'
+    else:
+        point_reason = _points_reason(left, right)
+    line_reason = lines_reason(left_seg, 'left') or lines_reason(right_seg, 'right')
+    if point_reason and line_reason:
+        if point_reason == 'no points':
+            return line_reason
+        return f'{point_reason}; and {line_reason}'
+    if point_reason:
+        left, right = np.zeros((0, 2)), np.zeros((0, 2))
+    if line_reason:
+        return _TwoStep(left, right, cKDTree(right))
+    left_seg = left_seg[segment_lengths(left_seg) > 0]
+    right_seg = right_seg[segment_lengths(right_seg) > 0]
+    tree = cKDTree(right) if right.shape[0] else None
+    return _TwoStep(left, right, tree, left_seg, LineMatcher(right_seg), line_weight)
+
+
+def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
+                   ) -> PlaneEstimate | FailedEstimate:
+    energies: list[float] = []
+    stages: list[int] = []
+    h = init
+    iterations = 0
+    converged = False
+    for k, scale in enumerate(gnc_scales(options)):
+        potential = make_potential(options.potential, options.lambda_weight, scale)
+        before = len(energies)
+        h, its, converged, matched = state.run_stage(h, potential, options, energies)
+        stages.extend([k] * (len(energies) - before))
+        iterations += its
+    trace = np.asarray(energies)
+    reason = check_homography(h)
+    if reason:
+        return FailedEstimate(reason, iterations, trace, 0, np.asarray(stages, np.int64))
+    if options.euclidean_refinement:
+        h, r, idx = state.polish(h, options.threshold_px, matched)
+    else:
+        _, r, idx, _ = matched
+    h = normalise_scale(h)
+    inliers = r < options.threshold_px
+    if np.count_nonzero(inliers) < options.min_inliers:
+        return FailedEstimate(
+            f'too few inliers: {np.count_nonzero(inliers)} < min_inliers '
+            f'{options.min_inliers}', iterations, trace, int(np.count_nonzero(inliers)),
+            np.asarray(stages, np.int64))
+    n = state.n_points
+    idx = idx.astype(np.int64)
+    return PlaneEstimate(
+        homography=h, inliers=inliers[:n], matches=idx[:n], residuals_px=r[:n],
+        iterations=iterations, energy_trace=trace, stage_trace=np.asarray(stages, np.int64),
+        converged=converged, final_energy=float(trace[-1]), potential=options.potential,
+        line_inliers=inliers[n:], line_matches=idx[n:], line_residuals_px=r[n:],
+        left_lines=state.left_segments)
+
+
+def estimate_plane(left_points: Any, right_points: Any, init: Any = None,
+                   options: EstimatorConfig | None = None, *,
+                   prior: PriorConfig | None = None,
+                   image_size: tuple[int, int] | None = None,
+                   left_lines: Any = None, right_lines: Any = None,
+                   **overrides: Any) -> PlaneEstimate | FailedEstimate:
+    """Estimate the dominant plane's homography from two feature sets without correspondences.
+
+    The features are points, line segments, or both (a joint energy in which a segment
+    weighs ``options.line_weight`` times a point).
+
+    Args:
+        left_points: (N, 2) float64 left image points (x, y); None or (0, 2) with lines only.
+        right_points: (M, 2) float64 right image points.
+        init: Optional (3, 3) (or 9 values, row-major) initial homography: the warm start.
+            Without it, candidates from ``prior`` are screened and the best few iterated.
+        options: Estimator settings; keyword ``overrides`` (e.g. ``potential='huber'``,
+            ``lambda_weight=0.3``, ``threshold_px=2.0``, ``max_iterations=50``,
+            ``line_weight=0.5``) replace fields of it.
+        prior: Camera set-up ranges, used when ``init`` is None (defaults to
+            ``PriorConfig()``).
+        image_size: ``(width, height)`` of the left image, needed with the prior (principal
+            point at its centre).
+        left_lines: Optional (K, 4) float64 left segments ``(x1, y1, x2, y2)``
+            (:func:`domplane_ros.core.lines.detect_lines`).
+        right_lines: Optional (L, 4) float64 right segments.
+        **overrides: Fields of :class:`~domplane_ros.config.EstimatorConfig`.
+
+    Returns:
+        :class:`PlaneEstimate`, or :class:`FailedEstimate` with the reason (too few,
+        repeated, collinear or non-finite points; fewer than 4 segments or segments all
+        concurrent or parallel; a singular initial homography; too few inliers).
+
+    Raises:
+        ValueError: If the arrays do not have shape (N, 2) (points) or (N, 4) (segments),
+            ``init`` is not 3x3, an override is invalid, or neither ``init`` nor
+            ``image_size`` is given.
+
+    """
+    options = _options(options, overrides)
+    if init is None and image_size is None:
+        raise ValueError('give an initial homography (init) or the image_size for the prior')
+    state = _build_state(left_points, right_points, left_lines, right_lines,
+                         options.line_weight)
+    if isinstance(state, str):
+        return FailedEstimate(state)
+    if init is not None:
+        h0 = as_homography(init, 'init')
+        reason = check_homography(h0)
+        if reason:
+            return FailedEstimate(f'initial {reason}')
+        return _estimate_from(state, normalise_scale(h0), options)
+    return _search_prior(state, prior or PriorConfig(), options, image_size)
+
+
+def prior_screening(left_points: Any, right_points: Any, candidates: np.ndarray,
+                    threshold_px: float, *, left_lines: Any = None, right_lines: Any = None,
+                    line_weight: float = 1.0) -> np.ndarray | str:
+    """Return the cheap screening energies of prior candidates, for a search over frames.
+
+    The same energy as the prior search of :func:`estimate_plane` (see
+    :func:`screening_energy`), so a caller can refine a few candidates per frame.
+
+    Args:
+        left_points: (N, 2) float64 left points.
+        right_points: (M, 2) float64 right points.
+        candidates: (K, 3, 3) float64 candidate homographies.
+        threshold_px: Truncation of the closest-feature distance, pixels.
+        left_lines: Optional (P, 4) float64 left segments.
+        right_lines: Optional (Q, 4) float64 right segments.
+        line_weight: Weight of the segments' energy.
+
+    Returns:
+        (K,) float64 energies (lower is better), or why the features cannot fix H.
+
+    """
+    state = _build_state(left_points, right_points, left_lines, right_lines, line_weight)
+    if isinstance(state, str):
+        return state
+    return screening_energy(state, candidates, threshold_px)
+
+
+def screening_energy(state: _TwoStep, candidates: np.ndarray, threshold_px: float
+                     ) -> np.ndarray:
+    """Return (M,) truncated closest-feature energies of candidate homographies.
+
+    Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.core.prior.screen_candidates`), segments
+    the same with the closest-line distance, weighted by the line weight.
+    """
+    costs = np.zeros(candidates.shape[0])
+    if state.n_points:
+        costs += screen_candidates(candidates, state.left, state.tree, threshold_px)
+    if state.n_lines:
+        costs += state.line_weight * screen_line_candidates(
+            candidates, state.left_segments, state.matcher, threshold_px)
+    return costs
+
+
+def _search_prior(state: _TwoStep, prior: PriorConfig, options: EstimatorConfig,
+                  image_size: tuple[int, int]) -> PlaneEstimate | FailedEstimate:
+    width, height = image_size
+    candidates = prior_candidates(prior, width, height)
+    costs = screening_energy(state, candidates, prior.screen_threshold_px)
+    order = np.argsort(costs)[:prior.refine_best]
+    best: PlaneEstimate | FailedEstimate | None = None
+    for i in order:
+        result = _estimate_from(state, candidates[i], options)
+        if best is None or better_estimate(result, best):
+            best = result
+    assert best is not None
+    if isinstance(best, PlaneEstimate):
+        return replace(best, candidates_tried=len(order))
+    return best
+
+
+def better_estimate(a: PlaneEstimate | FailedEstimate,
+                    b: PlaneEstimate | FailedEstimate) -> bool:
+    """Return True if ``a`` is a better search result than ``b`` (same features).
+
+    A success beats a failure; of two failures, more inliers; of two successes, the lower
+    final energy.
+    """
+    if a.ok != b.ok:
+        return bool(a.ok)
+    if not a.ok:
+        return a.n_inliers > b.n_inliers
+    return a.final_energy < b.final_energy

@@ -1,0 +1,156 @@
+"""Corner detection spread over the image by a grid.
+
+The estimator needs well-localised corners that repeat in both images, spread over the floor
+rather than piled up on the most textured obstacle. :func:`detect_corners` computes the
+Shi-Tomasi (minimum eigenvalue) corner response once over the region of interest, keeps the
+local maxima above ``quality_level`` times the strongest response that are also the strongest
+within ``min_distance_px``, and then takes corners round-robin over the grid cells: first the
+best corner of every cell, then the second best, and so on. Every cell thus gets an equal
+share of ``max_points``, and cells with too few corners give the rest of their share to the
+others. The chosen corners are refined to sub-pixel accuracy (a parabola fit of the response
+peak, then ``cv2.cornerSubPix``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import cv2
+from domplane_ros.config import FeatureConfig
+from domplane_ros.core.image import check_gray
+import numpy as np
+
+# Corner responses at or below this are noise-free flat image regions (cv2.cornerMinEigenVal
+# normalises gradients of 8-bit images to [0, 1], so a one-grey-level step is ~1e-6).
+_MIN_RESPONSE = 1e-7
+# Three iterations are enough: the start is within a pixel of the corner (measured).
+_SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 3, 0.1)
+
+
+def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, int, int, int]:
+    """Convert a fractional region of interest to pixel bounds.
+
+    Args:
+        roi: ``(x0, y0, x1, y1)`` as fractions of the image size, ``0 <= x0 < x1 <= 1`` and
+            ``0 <= y0 < y1 <= 1``.
+        width: Image width in pixels.
+        height: Image height in pixels.
+
+    Returns:
+        ``(x0, y0, x1, y1)`` integer pixel bounds, end exclusive, clipped to the image.
+
+    Raises:
+        ValueError: If ``roi`` does not hold four finite fractions forming a non-empty box.
+
+    """
+    try:
+        values = [float(v) for v in roi]
+    except (TypeError, ValueError) as err:
+        raise ValueError(f'roi must be four numbers (x0, y0, x1, y1), got {roi!r}') from err
+    if len(values) != 4 or not all(math.isfinite(v) for v in values):
+        raise ValueError(f'roi must be four finite numbers (x0, y0, x1, y1), got {roi!r}')
+    x0, y0, x1, y1 = values
+    if not (0.0 <= x0 < x1 <= 1.0 and 0.0 <= y0 < y1 <= 1.0):
+        raise ValueError(
+            f'roi must be fractions with 0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1, got {roi!r}')
+    return (int(math.floor(x0 * width)), int(math.floor(y0 * height)),
+            int(math.ceil(x1 * width)), int(math.ceil(y1 * height)))
+
+
+def detect_corners(gray: np.ndarray, config: FeatureConfig,
+                   roi: Sequence[float] | None = None) -> np.ndarray:
+    """Detect corners spread over a grid of cells, refined to sub-pixel accuracy.
+
+    Args:
+        gray: (H, W) uint8 image.
+        config: Detector settings: ``max_points``, ``quality_level``, ``min_distance_px``,
+            ``block_size``, ``grid_rows`` x ``grid_cols`` and the default ``roi``.
+        roi: Optional ``(x0, y0, x1, y1)`` region of interest as fractions of the image size;
+            overrides ``config.roi``. The grid divides this region.
+
+    Returns:
+        (N, 2) float64 corner positions ``(x, y)`` in full-image pixels, ``N <= max_points``,
+        in selection order (best corners of every cell first). A flat (for example black)
+        image, or an image or region too small for the detector window, gives (0, 2).
+
+    Raises:
+        ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
+
+    """
+    check_gray(gray)
+    height, width = gray.shape
+    x0, y0, x1, y1 = roi_to_pixels(config.roi if roi is None else roi, width, height)
+    empty = np.zeros((0, 2), np.float64)
+    block = int(config.block_size)
+    # Candidates keep this far from the image border, so the response window and the
+    # sub-pixel window stay inside the image.
+    border = block // 2 + 2
+    lo_x, lo_y = max(x0, border), max(y0, border)
+    hi_x, hi_y = min(x1, width - border), min(y1, height - border)
+    if hi_x <= lo_x or hi_y <= lo_y:
+        return empty
+    # Compute the response on the region grown by a margin, so the region's edge is not an
+    # artificial image border.
+    pad = block // 2 + 1
+    cx0, cy0 = max(0, lo_x - pad), max(0, lo_y - pad)
+    cx1, cy1 = min(width, hi_x + pad), min(height, hi_y + pad)
+    response = cv2.cornerMinEigenVal(gray[cy0:cy1, cx0:cx1], block, ksize=3)
+    inner = response[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
+    strongest = float(inner.max())
+    if strongest <= _MIN_RESPONSE:
+        return empty
+    threshold = max(config.quality_level * strongest, _MIN_RESPONSE)
+    # Keep the strongest response within min_distance_px (a square neighbourhood).
+    radius = max(1, int(round(config.min_distance_px)))
+    kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * radius + 1, 2 * radius + 1))
+    peaks = cv2.dilate(response, kernel)[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
+    # (cv2.compare takes a 1 x 1 array for a scalar, hence numpy for that size.)
+    above = (cv2.compare(inner, threshold, cv2.CMP_GT) if inner.size > 1
+             else (inner > threshold).astype(np.uint8) * 255)
+    keep = cv2.bitwise_and(cv2.compare(inner, peaks, cv2.CMP_GE), above)
+    found = cv2.findNonZero(keep)
+    if found is None:
+        return empty
+    found = found.reshape(-1, 2).astype(np.int64)  # (N, 2) or (N, 1, 2) by cv2 version
+    xs, ys = found[:, 0], found[:, 1]
+    strength = inner[ys, xs]
+    # Round-robin over the grid cells: rank each corner within its cell by strength, then
+    # take rank 0 of every cell, then rank 1, ... (ties by strength).
+    rows = min(config.grid_rows, hi_y - lo_y)
+    cols = min(config.grid_cols, hi_x - lo_x)
+    cell = (ys * rows // (hi_y - lo_y)) * cols + xs * cols // (hi_x - lo_x)
+    order = np.lexsort((-strength, cell))
+    sorted_cell = cell[order]
+    first = np.searchsorted(sorted_cell, sorted_cell, side='left')
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size) - first
+    chosen = np.lexsort((-strength, rank))[:config.max_points]
+    ys, xs = ys[chosen], xs[chosen]
+    # Sub-pixel refinement, first the vertex of a parabola through the response peak and its
+    # neighbours along x and y (free), then cv2.cornerSubPix (a few iterations). The parabola
+    # alone is biased at X-junctions (tiles, checkers), where the response has two peaks
+    # beside the junction; cornerSubPix moves to the saddle point. Where cornerSubPix leaves
+    # its window (blurry, edge-like corners) the parabola vertex is kept.
+    ry, rx = ys + (lo_y - cy0), xs + (lo_x - cx0)
+    centre = response[ry, rx].astype(np.float64)
+    offsets = []
+    for before, after in ((response[ry, rx - 1], response[ry, rx + 1]),
+                          (response[ry - 1, rx], response[ry + 1, rx])):
+        curvature = before - 2.0 * centre + after
+        step = 0.5 * (before - after) / np.where(curvature < -1e-20, curvature, -np.inf)
+        offsets.append(np.clip(step, -0.5, 0.5))
+    low = np.array([lo_x, lo_y], np.float64)
+    high = np.array([hi_x - 1, hi_y - 1], np.float64)
+    peak = np.clip(np.stack([xs + lo_x + offsets[0], ys + lo_y + offsets[1]], axis=1), low,
+                   high)
+    # cornerSubPix needs the window plus a margin inside the image.
+    half = min(max(2, block), (width - 6) // 2, (height - 6) // 2)
+    if half < 1:
+        return peak
+    refined = cv2.cornerSubPix(gray, peak.astype(np.float32).reshape(-1, 1, 2), (half, half),
+                               (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+    good = (np.all(np.isfinite(refined), axis=1)
+            & np.all(np.abs(refined - peak) <= half, axis=1)
+            & np.all((refined >= low) & (refined <= high), axis=1))
+    return np.where(good[:, None], refined, peak)

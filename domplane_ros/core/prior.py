@@ -1,0 +1,138 @@
+"""Initial homographies from rough ranges of the camera set-up (Fornland & Schnörr, sec. 2.4).
+
+The camera model (shared with the scene renderer in :mod:`domplane_ros.sim.scene`):
+
+* Left camera frame: x right, y down, z forward (optical axis). Principal point at the image
+  centre, square pixels, focal length ``f`` in pixels: ``K = [[f, 0, cx], [0, f, cy], [0, 0, 1]]``.
+* The plane lies at height ``h`` below the left camera. The camera is tilted toward it by
+  ``tilt`` (positive looks down), so the plane's unit normal in left-camera coordinates is
+  ``n = (0, cos(tilt), sin(tilt))`` and the plane is ``n . X = h``.
+* The right camera's centre is ``C = (b, 0, 0)`` in left-camera coordinates, and it is yawed
+  toward the left camera by the vergence ``v`` (positive converges):
+  ``X_right = R_v (X_left - C)`` with ``R_v = [[cos v, 0, sin v], [0, 1, 0], [-sin v, 0, cos v]]``.
+
+A plane point then maps from the left to the right image by
+``H = K R_v (I - C n^T / h) K^-1``, which depends on ``b`` and ``h`` only through ``b / h``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from domplane_ros.config import PriorConfig
+    from scipy.spatial import cKDTree
+
+
+def plane_homography(focal_px: float, baseline_over_height: float, tilt_deg: float,
+                     vergence_deg: float, width: int, height: int) -> np.ndarray:
+    """Return the left-to-right homography of the ground plane for one camera set-up.
+
+    Args:
+        focal_px: Focal length in pixels (both cameras).
+        baseline_over_height: Stereo baseline divided by the camera height above the plane.
+        tilt_deg: Tilt of the cameras toward the plane, degrees (positive looks down).
+        vergence_deg: Yaw of the right camera toward the left one, degrees.
+        width: Image width in pixels (principal point at the centre).
+        height: Image height in pixels.
+
+    Returns:
+        (3, 3) float64 homography with ``H[2, 2] == 1``, mapping left pixels (x, y, 1) to
+        right pixels.
+
+    Raises:
+        ValueError: If a value is non-finite, the focal length or image size is not
+            positive, or the plane normal is degenerate.
+
+    """
+    values = (focal_px, baseline_over_height, tilt_deg, vergence_deg)
+    if not all(math.isfinite(v) for v in values):
+        raise ValueError(f'camera set-up values must be finite, got {values!r}')
+    if focal_px <= 0 or width <= 0 or height <= 0:
+        raise ValueError(
+            f'focal_px, width and height must be positive, got {focal_px}, {width}, {height}')
+    k = intrinsics(focal_px, width, height)
+    tilt = math.radians(tilt_deg)
+    verg = math.radians(vergence_deg)
+    normal = np.array([0.0, math.cos(tilt), math.sin(tilt)])
+    centre = np.array([baseline_over_height, 0.0, 0.0])
+    r_v = np.array([[math.cos(verg), 0.0, math.sin(verg)],
+                    [0.0, 1.0, 0.0],
+                    [-math.sin(verg), 0.0, math.cos(verg)]])
+    h = k @ r_v @ (np.eye(3) - np.outer(centre, normal)) @ np.linalg.inv(k)
+    if abs(h[2, 2]) < 1e-12:
+        raise ValueError('degenerate camera set-up: H[2, 2] is zero')
+    return h / h[2, 2]
+
+
+def intrinsics(focal_px: float, width: int, height: int) -> np.ndarray:
+    """Return the (3, 3) calibration matrix with the principal point at the image centre."""
+    return np.array([[focal_px, 0.0, (width - 1) / 2.0],
+                     [0.0, focal_px, (height - 1) / 2.0],
+                     [0.0, 0.0, 1.0]])
+
+
+def _samples(bounds: tuple[float, float], count: int) -> np.ndarray:
+    low, high = bounds
+    if high <= low or count == 1:
+        return np.array([0.5 * (low + high)])
+    return np.linspace(low, high, count)
+
+
+def prior_candidates(prior: PriorConfig, width: int, height: int) -> np.ndarray:
+    """Return candidate homographies on a grid over the camera set-up ranges.
+
+    Each range gets ``prior.samples`` evenly spaced values (one, its middle, if it is a
+    single value), and every combination gives one candidate
+    ``H = K R_v (I - C n^T / h) K^-1``.
+
+    Args:
+        prior: The camera set-up ranges.
+        width: Left image width in pixels.
+        height: Left image height in pixels.
+
+    Returns:
+        (M, 3, 3) float64 candidate homographies, ``H[2, 2] == 1``.
+
+    Raises:
+        ValueError: If the image size is not positive.
+
+    """
+    if width <= 0 or height <= 0:
+        raise ValueError(f'image size must be positive, got {width}x{height}')
+    out = [plane_homography(f, bh, tilt, verg, width, height)
+           for f in _samples(prior.focal_px, prior.samples)
+           for bh in _samples(prior.baseline_over_height, prior.samples)
+           for tilt in _samples(prior.tilt_deg, prior.samples)
+           for verg in _samples(prior.vergence_deg, prior.samples)]
+    return np.stack(out)
+
+
+def screen_candidates(candidates: np.ndarray, left_points: np.ndarray, right_tree: cKDTree,
+                      threshold_px: float) -> np.ndarray:
+    """Score candidates by a cheap truncated closest-point energy (lower is better).
+
+    The energy of a candidate is ``sum_i min(d_i, t)^2`` with ``d_i`` the distance from the
+    predicted left point to its closest right point: one tree query for all candidates.
+
+    Args:
+        candidates: (M, 3, 3) float64 homographies.
+        left_points: (N, 2) float64 left points.
+        right_tree: cKDTree over the right points.
+        threshold_px: Truncation ``t`` in pixels.
+
+    Returns:
+        (M,) float64 screening energies.
+
+    """
+    from domplane_ros.core.homography import apply_homography
+
+    m = candidates.shape[0]
+    n = left_points.shape[0]
+    pred = np.concatenate([apply_homography(h, left_points) for h in candidates])
+    d, _ = right_tree.query(pred, distance_upper_bound=threshold_px)
+    d = np.minimum(d, threshold_px).reshape(m, n)
+    return np.sum(d * d, axis=1)

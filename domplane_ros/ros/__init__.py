@@ -1,0 +1,1 @@
+"""The live ROS 2 adapter: ``plane_node`` and the ROS message building it needs."""

@@ -1,0 +1,1 @@
+"""Seeded synthetic data with ground truth: rendered stereo scenes and point sets."""

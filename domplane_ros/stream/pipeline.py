@@ -1,0 +1,651 @@
+"""One object per stereo stream: features, warm start or prior, estimate, mask.
+
+The live node and the offline replay are thin adapters around :class:`PlanePipeline`, so the
+same frames give the same results in both. All state that lives across frames (the last good
+homography, its energy, the lock state, the counters) lives here and nowhere else.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+import math
+import time
+
+from domplane_ros.config import PlaneNodeConfig, PriorConfig
+from domplane_ros.core.estimator import (better_estimate, estimate_plane, FailedEstimate,
+                                         PlaneEstimate, prior_screening)
+from domplane_ros.core.features import detect_corners, roi_to_pixels
+from domplane_ros.core.homography import apply_homography
+from domplane_ros.core.image import check_gray
+from domplane_ros.core.lines import detect_lines, endpoints
+from domplane_ros.core.mask import overlay, plane_mask
+from domplane_ros.core.prior import prior_candidates
+from domplane_ros.core.tracking import camera_motion, predict_plane_homography
+from domplane_ros.stream.health import homography_problem, inlier_spread, PairChecks, texture_note
+import numpy as np
+
+# Lock states reported in diagnostics.
+LOCKED = 'locked'        # the last frame gave a plane; the next one warm-starts from it
+TRACKING = 'tracking'    # an estimate failed; the last plane is carried through the motion
+SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidates per frame
+LOCK_STATES = (LOCKED, TRACKING, SEARCHING)
+
+# Margin (fraction of the image diagonal) around the image-corner positions that the prior's
+# candidates reach; a homography moving a corner beyond it violates the prior.
+_PRIOR_BOUNDS_MARGIN = 0.15
+# Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
+# for a first pass.
+_WIDE_BASIN_FACTOR = 4.0
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What the pipeline made of one stereo pair.
+
+    Attributes:
+        stamp_ns: The pair's stamp (the left image's), nanoseconds.
+        ok: Whether a plane was found; if not, ``homography`` is None and the mask is all 0.
+        homography: (3, 3) float64 left-to-right homography with ``H[2, 2] == 1``, or None.
+        mask: (H, W) uint8 left-image mask: 255 plane, 127 obstacle, 0 unknown.
+        estimate: The estimator's result (success or failure value).
+        left_points: (N, 2) float64 left corners.
+        right_points: (M, 2) float64 right corners.
+        reinitialised: True if this frame worked on the prior search (or the configured
+            initial homography) rather than a warm start.
+        reason: Why the frame failed ('' when ok).
+        state: Lock state after this frame: ``'locked'``, ``'tracking'`` or ``'searching'``.
+        timings_ms: Milliseconds spent in ``features``, ``tracking``, ``estimate``, ``mask``
+            and ``total``.
+        warnings: Input problems that did not refuse the pair (a stamp jump, a size change),
+            each a one-line message (see :mod:`domplane_ros.stream.health`).
+        left_lines: (K, 4) float64 left line segments ``(x1, y1, x2, y2)`` (empty unless
+            ``features.kind`` is ``lines`` or ``both``).
+        right_lines: (L, 4) float64 right line segments.
+        warm_start: Where this frame's estimate started: ``'prediction'`` (the last
+            homography moved through the tracked camera motion), ``'last'`` (the last
+            homography as is), ``'search'`` (prior candidates), ``'initial'`` (the
+            configured initial homography).
+        prediction: (3, 3) float64 predicted homography ``M_right H M_left^-1`` of this frame,
+            or None when tracking gave none.
+        candidates: Prior candidates refined in this frame (at most
+            ``pipeline.search_candidates_per_frame``).
+        fast_motion: True if the head's joints moved faster than
+            ``pipeline.fast_joint_velocity``.
+
+    """
+
+    stamp_ns: int
+    ok: bool
+    homography: np.ndarray | None
+    mask: np.ndarray
+    estimate: PlaneEstimate | FailedEstimate
+    left_points: np.ndarray
+    right_points: np.ndarray
+    reinitialised: bool
+    reason: str
+    state: str
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    right_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    warm_start: str = ''
+    prediction: np.ndarray | None = None
+    candidates: int = 0
+    fast_motion: bool = False
+
+    @property
+    def n_inliers(self) -> int:
+        """Return the number of inlier left points (0 on failure)."""
+        return self.estimate.n_inliers if self.estimate is not None else 0
+
+
+@dataclass
+class PipelineStats:
+    """Counters since the pipeline was made."""
+
+    frames: int = 0
+    succeeded: int = 0
+    failed: int = 0
+    reinitialisations: int = 0
+    resets: int = 0
+    predictions: int = 0
+    candidates: int = 0
+
+
+@dataclass
+class _Search:
+    """A prior search spread over frames: candidates tried so far and the best result."""
+
+    tried: set[int] = field(default_factory=set)
+    best: np.ndarray | None = None
+    initial_tried: bool = False
+
+
+@dataclass
+class _Previous:
+    """The previous frame's images and corners, for tracking."""
+
+    left: np.ndarray
+    right: np.ndarray
+    left_points: np.ndarray
+    right_points: np.ndarray
+
+
+class PlanePipeline:
+    """Dominant-plane estimation over a stream of stereo pairs.
+
+    The lock state machine: ``'locked'`` while frames give a plane (each warm-starts from
+    the prediction, else the last homography); after a failed or suspicious estimate,
+    ``'tracking'`` for up to ``pipeline.max_tracking_frames`` frames, carrying the last plane
+    forward through the cameras' tracked motion; then ``'searching'``: the prior candidates are
+    screened cheaply every frame and ``pipeline.search_candidates_per_frame`` of them refined,
+    the best so far carried forward, until ``prior.refine_best`` have been tried.
+
+    Args:
+        config: The whole configuration (the node's parameters).
+
+    """
+
+    def __init__(self, config: PlaneNodeConfig | None = None) -> None:
+        """Start with no warm start: the first frames search the prior."""
+        self.config = config if config is not None else PlaneNodeConfig()
+        self.stats = PipelineStats()
+        self._last_h: np.ndarray | None = None
+        self._last_energy_per_point: float | None = None
+        self.checks = PairChecks(self.config.pipeline.max_clipped_fraction,
+                                 self.config.pipeline.max_stamp_jump_s)
+        self._bounds_cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
+        self._state = SEARCHING
+        self._tracking_frames = 0
+        self._search: _Search | None = None
+        self._previous: _Previous | None = None
+
+    @property
+    def last_homography(self) -> np.ndarray | None:
+        """Return the last plane (or the one carried while tracking), or None."""
+        return None if self._last_h is None else self._last_h.copy()
+
+    @property
+    def state(self) -> str:
+        """Return the lock state: ``'locked'``, ``'tracking'`` or ``'searching'``."""
+        return self._state
+
+    def update_config(self, config: PlaneNodeConfig) -> None:
+        """Use a new configuration from the next frame on, keeping the warm start.
+
+        A changed prior or initial homography drops the warm start.
+        """
+        if (config.prior != self.config.prior
+                or config.initial_homography != self.config.initial_homography):
+            self.reset()
+            self._bounds_cache.clear()
+            self._candidates_cache.clear()
+        self.config = config
+        self.checks.max_clipped_fraction = config.pipeline.max_clipped_fraction
+        self.checks.max_stamp_jump_s = config.pipeline.max_stamp_jump_s
+
+    def reset(self) -> None:
+        """Drop the warm start: the next frames search the prior."""
+        if self._last_h is not None or self._state != SEARCHING:
+            self.stats.resets += 1
+        self._last_h = None
+        self._last_energy_per_point = None
+        self._state = SEARCHING
+        self._tracking_frames = 0
+        self._search = None
+        self._previous = None
+
+    def process(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
+                reset: bool = False, joint_speed: float | None = None) -> FrameResult:
+        """Estimate the plane for one stereo pair.
+
+        Args:
+            left: (H, W) uint8 left grey image.
+            right: (H', W') uint8 right grey image.
+            stamp_ns: The pair's stamp in nanoseconds; a stamp older than the last one (clock
+                reset, bag loop) or more than ``pipeline.max_stamp_jump_s`` newer drops the
+                warm start.
+            reset: Drop the warm start before this frame.
+            joint_speed: Largest head joint speed in rad/s, if known (None: no joint input).
+
+        Returns:
+            The :class:`FrameResult`; it is never a non-finite homography. Pairs that
+            :class:`~domplane_ros.stream.health.PairChecks` refuses (sizes differ, a frozen camera,
+            a black or saturated frame), too few features, inliers with too little spread
+            (``pipeline.min_inlier_spread``) and homographies outside the prior are failures
+            with the reason, a mask of zeros and no homography; like any failure they move
+            the lock state to ``'tracking'`` (then ``'searching'``).
+
+        Raises:
+            ValueError: If an image is not a 2-D uint8 array, or ``joint_speed`` is not
+                finite.
+
+        """
+        t0 = time.perf_counter()
+        check_gray(left, 'left')
+        check_gray(right, 'right')
+        if joint_speed is not None and not math.isfinite(joint_speed):
+            raise ValueError(f'joint_speed must be finite, got {joint_speed!r}')
+        check = self.checks.check(left, right, stamp_ns)
+        if reset or check.reset:
+            self.reset()
+        self.stats.frames += 1
+        cfg = self.config
+        fast = joint_speed is not None and abs(joint_speed) > cfg.pipeline.fast_joint_velocity
+        if check.refused:
+            return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
+        feats = _detect(left, right, cfg)
+        left_pts, right_pts = feats[0], feats[1]
+        t1 = time.perf_counter()
+        height, width = left.shape
+        size = (width, height)
+        track_pts = self._tracking_points(left, right, feats)
+        motions = self._camera_motions(left, right)
+        t2 = time.perf_counter()
+        step = _Step()
+        if self._state != SEARCHING:
+            self._track_or_lock(step, feats, size, motions, fast)
+        if self._state == SEARCHING:
+            self._search_step(step, feats, size, motions)
+        t3 = time.perf_counter()
+        estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
+        if step.accepted:
+            h = estimate.homography
+            mask = plane_mask(left, right, h, cfg.mask)
+            self._last_h = h
+            self._last_energy_per_point = estimate.final_energy / max(_n_left(feats), 1)
+            self.stats.succeeded += 1
+        else:
+            h = None
+            mask = np.zeros(left.shape, np.uint8)
+            self.stats.failed += 1
+        reason = '' if step.accepted else (step.reason or estimate.reason)
+        if not step.accepted and reason.startswith(('too few left', 'too few right')):
+            self.checks.counts['too_few_features'] += 1
+            reason += f' (left {texture_note(left)}; right {texture_note(right)})'
+        if not step.keep_previous:
+            self._previous = _Previous(left.copy(), right.copy(), *track_pts)
+        t4 = time.perf_counter()
+        timings = {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
+                   'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3),
+                   'total': 1e3 * (t4 - t0)}
+        return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
+                           estimate=estimate, left_points=left_pts, right_points=right_pts,
+                           reinitialised=step.reinitialised, reason=reason,
+                           state=self._state, timings_ms=timings, warnings=check.warnings,
+                           left_lines=feats[2], right_lines=feats[3],
+                           warm_start=step.warm_start, prediction=step.prediction,
+                           candidates=step.candidates, fast_motion=fast)
+
+    def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
+                 warnings: tuple[str, ...], t0: float, fast: bool) -> FrameResult:
+        """Return the failed frame of a refused pair: a failure like any other.
+
+        The plane is carried as in the ``'tracking'`` state (or the search goes on); the
+        refused images are not kept for tracking.
+        """
+        self.stats.failed += 1
+        if self._state != SEARCHING:
+            self._lose_frame(_Step(keep_previous=True), None)
+        empty = np.zeros((0, 2), np.float64)
+        total_ms = 1e3 * (time.perf_counter() - t0)
+        return FrameResult(stamp_ns=stamp_ns, ok=False, homography=None,
+                           mask=np.zeros(left.shape, np.uint8), estimate=FailedEstimate(reason),
+                           left_points=empty, right_points=empty, reinitialised=False,
+                           reason=reason, state=self._state,
+                           timings_ms={'features': 0.0, 'tracking': 0.0, 'estimate': 0.0,
+                                       'mask': 0.0, 'total': total_ms},
+                           warnings=warnings, fast_motion=fast)
+
+    def _tracking_points(self, left: np.ndarray, right: np.ndarray,
+                         feats: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+        """Return the corners to track from this frame (detected if only lines are used)."""
+        if not self.config.tracking.enabled or self.config.features.kind != 'lines':
+            return feats[0], feats[1]
+        return (detect_corners(left, self.config.features),
+                detect_corners(right, self.config.features))
+
+    # --- Temporal prediction ---------------------------------------------------------------
+    def _camera_motions(self, left: np.ndarray, right: np.ndarray
+                        ) -> tuple[np.ndarray, np.ndarray] | None:
+        """Return ``(M_left, M_right)`` from the previous frame, or None."""
+        cfg = self.config.tracking
+        prev = self._previous
+        if not cfg.enabled or prev is None:
+            return None
+        if self._state == SEARCHING and (self._search is None or self._search.best is None):
+            return None
+        motion_left = camera_motion(prev.left, left, prev.left_points, cfg)
+        if not motion_left.ok:
+            return None
+        motion_right = camera_motion(prev.right, right, prev.right_points, cfg)
+        if not motion_right.ok:
+            return None
+        return motion_left.homography, motion_right.homography
+
+    def _propagate(self, h: np.ndarray, motions: tuple[np.ndarray, np.ndarray] | None
+                   ) -> np.ndarray | None:
+        if motions is None:
+            return None
+        return predict_plane_homography(h, motions[0], motions[1])
+
+    # --- Locked and tracking ---------------------------------------------------------------
+    def _track_or_lock(self, step: _Step, feats: tuple[np.ndarray, ...],
+                       size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
+                       fast: bool) -> None:
+        assert self._last_h is not None
+        prediction = self._propagate(self._last_h, motions)
+        if prediction is not None and self._suspicious_bounds(prediction, size, count=False):
+            prediction = None
+        step.prediction = prediction
+        if prediction is not None:
+            self.stats.predictions += 1
+        # The last homography is only tried without a prediction: when the cameras moved, it
+        # is stale, and a stale start can slide into a look-alike.
+        starts = [('prediction', prediction) if prediction is not None
+                  else ('last', self._last_h)]
+        reason = self._too_few(feats)
+        for name, init in starts if not reason else ():
+            wide = fast and prediction is None
+            estimate = self._warm_estimate(feats, init, wide)
+            step.estimate, step.warm_start = estimate, name
+            if not estimate.ok:
+                reason = estimate.reason
+                continue
+            # A fast head (joint input) may change the energy legitimately: no energy check.
+            reason = self._suspicious(estimate, _n_left(feats), size, energy=not fast)
+            if not reason:
+                reason = self._input_problem(estimate, feats[0], size)
+            if not reason:
+                step.accepted = True
+                self._state = LOCKED
+                self._tracking_frames = 0
+                return
+        step.reason = reason
+        self._lose_frame(step, prediction)
+
+    def _lose_frame(self, step: _Step, prediction: np.ndarray | None) -> None:
+        """Failed or suspicious: carry the plane forward (tracking) or give up (searching)."""
+        self._tracking_frames += 1
+        if self._tracking_frames <= self.config.pipeline.max_tracking_frames:
+            self._state = TRACKING
+            if prediction is not None:
+                self._last_h = prediction
+            else:
+                # The carried plane still belongs to the previous frame: track from there.
+                step.keep_previous = True
+            return
+        self._start_search()
+
+    def _warm_estimate(self, feats: tuple[np.ndarray, ...], init: np.ndarray,
+                       wide: bool) -> PlaneEstimate | FailedEstimate:
+        cfg = self.config
+        lines = self._lines(feats)
+        warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
+                                                       cfg.pipeline.warm_gnc_start_px))
+        if wide:
+            # Fast head and no prediction: a first pass with a wide basin.
+            wide_options = replace(cfg.estimator, threshold_px=min(
+                200.0, _WIDE_BASIN_FACTOR * cfg.estimator.threshold_px))
+            first = estimate_plane(feats[0], feats[1], init, wide_options, **lines)
+            if first.ok:
+                init = first.homography
+        return estimate_plane(feats[0], feats[1], init, warm, **lines)
+
+    def _lines(self, feats: tuple[np.ndarray, ...]) -> dict[str, np.ndarray]:
+        if self.config.features.kind == 'points':
+            return {}
+        return {'left_lines': feats[2], 'right_lines': feats[3]}
+
+    # --- Searching -------------------------------------------------------------------------
+    def _start_search(self) -> None:
+        self._state = SEARCHING
+        self._tracking_frames = 0
+        self._last_h = None
+        self._last_energy_per_point = None
+        self._search = None
+
+    def _search_step(self, step: _Step, feats: tuple[np.ndarray, ...],
+                     size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
+                     ) -> None:
+        """Refine the next few prior candidates; accept the best once enough were tried."""
+        cfg = self.config
+        step.reinitialised = True
+        if self._search is None:
+            self._search = _Search()
+            self.stats.reinitialisations += 1
+        search = self._search
+        left_pts, right_pts = feats[0], feats[1]
+        lines = self._lines(feats)
+        reason = self._too_few(feats)
+        if reason:
+            step.reason = reason
+            return
+        budget = cfg.pipeline.search_candidates_per_frame
+        best: PlaneEstimate | FailedEstimate | None = None
+        if search.best is not None:
+            # The best so far, moved to this frame and refined on its points.
+            start = self._propagate(search.best, motions)
+            best = self._warm_estimate(feats, start if start is not None else search.best,
+                                       False)
+            if best.ok and self._rejected(best, feats, size):
+                best = None
+        rejection = ''
+        if cfg.initial_homography and not search.initial_tried:
+            search.initial_tried = True
+            budget -= 1
+            step.candidates += 1
+            first = estimate_plane(left_pts, right_pts, np.array(cfg.initial_homography),
+                                   cfg.estimator, **lines)
+            if first.ok and not self._rejected(first, feats, size):
+                step.warm_start = 'initial'
+                self._accept_search(step, first)
+                return
+        candidates = self._candidates(size)
+        limit = min(cfg.prior.refine_best, candidates.shape[0])
+        costs = prior_screening(left_pts, right_pts, candidates, cfg.prior.screen_threshold_px,
+                                line_weight=cfg.estimator.line_weight, **lines)
+        if isinstance(costs, str):
+            step.reason = costs
+            return
+        order = [int(i) for i in np.argsort(costs, kind='stable') if int(i) not in search.tried]
+        for index in order[:max(0, min(budget, limit - len(search.tried)))]:
+            search.tried.add(index)
+            step.candidates += 1
+            result = estimate_plane(left_pts, right_pts, candidates[index], cfg.estimator,
+                                    **lines)
+            problem = self._rejected(result, feats, size) if result.ok else ''
+            if problem:
+                rejection = problem
+                continue
+            if best is None or better_estimate(result, best):
+                best = result
+        self.stats.candidates += step.candidates
+        step.warm_start = 'search'
+        step.estimate = best
+        search.best = best.homography if best is not None and best.ok else None
+        if len(search.tried) < limit:
+            step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
+                           'refined')
+            return
+        if best is not None and best.ok:
+            self._accept_search(step, best)
+            return
+        if best is None and rejection:
+            self._count_rejection(rejection)
+            step.reason = f'prior search found no plane: {rejection}'
+        else:
+            step.reason = ('prior search found no plane' if best is None else
+                           f'prior search found no plane: {best.reason}')
+        self._search = None  # start again with the next frame's points
+
+    def _accept_search(self, step: _Step, estimate: PlaneEstimate) -> None:
+        step.estimate = estimate
+        step.accepted = True
+        self._state = LOCKED
+        self._search = None
+        self._tracking_frames = 0
+
+    def _candidates(self, size: tuple[int, int]) -> np.ndarray:
+        if size not in self._candidates_cache:
+            self._candidates_cache[size] = prior_candidates(self.config.prior, *size)
+        return self._candidates_cache[size]
+
+    # --- Checks ----------------------------------------------------------------------------
+    def _too_few(self, feats: tuple[np.ndarray, ...]) -> str:
+        min_inliers = self.config.estimator.min_inliers
+        n_left = _n_left(feats)
+        n_right = feats[1].shape[0] + feats[3].shape[0]
+        reason = ''
+        if n_left < min_inliers:
+            reason = f'too few left features: {n_left} < min_inliers {min_inliers}'
+        elif n_right < 4:
+            reason = f'too few right features: {n_right}'
+        return reason
+
+    def _rejected(self, estimate: PlaneEstimate, feats: tuple[np.ndarray, ...],
+                  size: tuple[int, int]) -> str:
+        """Return why a search result must not be accepted ('' if it may be; not counted)."""
+        return (self._suspicious_bounds(estimate.homography, size, count=False)
+                or self._input_problem(estimate, feats[0], size, count=False))
+
+    def _count_rejection(self, reason: str) -> None:
+        """Count a search's final rejection reason once, under its kind."""
+        for needle, key in (('outside the prior', 'outside_prior'),
+                            ('degenerate geometry', 'degenerate_geometry')):
+            if needle in reason:
+                self.checks.counts[key] += 1
+                return
+        self.checks.counts['invalid_homography'] += 1
+
+    def _input_problem(self, estimate: PlaneEstimate, left_pts: np.ndarray,
+                       size: tuple[int, int], count: bool = True) -> str:
+        """Return why a converged estimate must not be published ('' if it may be)."""
+        problem = homography_problem(estimate.homography)
+        if problem:
+            if count:
+                self.checks.counts['invalid_homography'] += 1
+            return problem
+        min_spread = self.config.pipeline.min_inlier_spread
+        if min_spread > 0:
+            x0, y0, x1, y1 = roi_to_pixels(self.config.features.roi, *size)
+            # Inlier corners and the endpoints of inlier segments.
+            inliers = np.concatenate([
+                left_pts[estimate.inliers],
+                endpoints(estimate.left_lines[estimate.line_inliers])])
+            spread = inlier_spread(inliers, float((x1 - x0) * (y1 - y0)))
+            if spread < min_spread:
+                if count:
+                    self.checks.counts['degenerate_geometry'] += 1
+                return (f'degenerate geometry: the inliers span {100 * spread:.2f} % of the '
+                        f'region of interest (< pipeline.min_inlier_spread {min_spread:g}); '
+                        'collinear or packed in one patch, they do not constrain the plane')
+        return ''
+
+    def _suspicious(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
+                    energy: bool = True) -> str:
+        """Return why an estimate should not be trusted ('' if it can be)."""
+        cfg = self.config.pipeline
+        if energy and self._last_energy_per_point is not None:
+            per_point = estimate.final_energy / max(n_points, 1)
+            limit = cfg.max_energy_ratio * max(self._last_energy_per_point, 1e-3)
+            if per_point > limit:
+                return (f'energy jump: {per_point:.3g} per point > {cfg.max_energy_ratio} x '
+                        f'last {self._last_energy_per_point:.3g}')
+        return self._suspicious_bounds(estimate.homography, size)
+
+    def _suspicious_bounds(self, homography: np.ndarray, size: tuple[int, int],
+                           count: bool = True) -> str:
+        if self.config.pipeline.check_prior_bounds:
+            low, high = self._prior_bounds(size)
+            corners = _image_corners(*size)
+            mapped = apply_homography(homography, corners)
+            if np.any(mapped < low) or np.any(mapped > high):
+                if count:
+                    self.checks.counts['outside_prior'] += 1
+                return 'homography outside the prior: an image corner maps beyond its range'
+        return ''
+
+    def _prior_bounds(self, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+        if size not in self._bounds_cache:
+            cands = prior_candidates(_bounds_prior(self.config.prior), *size)
+            corners = _image_corners(*size)
+            mapped = np.stack([apply_homography(h, corners) for h in cands])
+            margin = _PRIOR_BOUNDS_MARGIN * float(np.hypot(*size))
+            self._bounds_cache[size] = (mapped.min(axis=0) - margin,
+                                        mapped.max(axis=0) + margin)
+        return self._bounds_cache[size]
+
+
+@dataclass
+class _Step:
+    """What one frame's estimation got to (internal)."""
+
+    estimate: PlaneEstimate | FailedEstimate | None = None
+    accepted: bool = False
+    reason: str = ''
+    warm_start: str = ''
+    prediction: np.ndarray | None = None
+    candidates: int = 0
+    reinitialised: bool = False
+    keep_previous: bool = False
+
+
+def debug_overlay(left: np.ndarray, result: FrameResult) -> np.ndarray:
+    """Return the (H, W, 3) uint8 RGB debug image of a frame: mask tint, features.
+
+    Inlier corners are cyan circles and inlier segments cyan lines; the rest magenta (all of
+    them when no plane was found).
+
+    Args:
+        left: (H, W) uint8 left image of the frame.
+        result: The pipeline's result for it.
+
+    """
+    pts = result.left_points
+    segs = result.left_lines
+    est = result.estimate
+    if result.ok and pts.shape[0] == est.inliers.shape[0]:
+        inl = est.inliers
+    else:
+        inl = np.zeros(pts.shape[0], bool)
+    if result.ok and segs.shape[0] == est.line_inliers.shape[0]:
+        line_inl = est.line_inliers
+    else:
+        line_inl = np.zeros(segs.shape[0], bool)
+    return overlay(left, result.mask, pts[inl], pts[~inl], segs[line_inl], segs[~line_inl])
+
+
+def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return left and right corners and segments, as ``features.kind`` asks."""
+    kind = cfg.features.kind
+    none_pts = np.zeros((0, 2))
+    none_seg = np.zeros((0, 4))
+    if kind == 'lines':
+        left_pts = right_pts = none_pts
+    else:
+        left_pts = detect_corners(left, cfg.features)
+        right_pts = detect_corners(right, cfg.features)
+    if kind == 'points':
+        left_seg = right_seg = none_seg
+    else:
+        left_seg = detect_lines(left, cfg.features)
+        right_seg = detect_lines(right, cfg.features)
+    return left_pts, right_pts, left_seg, right_seg
+
+
+def _n_left(feats: tuple[np.ndarray, ...]) -> int:
+    """Return the number of left features (corners plus segments)."""
+    return int(feats[0].shape[0] + feats[2].shape[0])
+
+
+def _bounds_prior(prior: PriorConfig) -> PriorConfig:
+    """Return the prior sampled at its range ends and middle, for the bounds check."""
+    return replace(prior, samples=3)
+
+
+def _image_corners(width: int, height: int) -> np.ndarray:
+    return np.array([[0.0, 0.0], [width - 1.0, 0.0], [width - 1.0, height - 1.0],
+                     [0.0, height - 1.0]])

@@ -1,0 +1,1 @@
+"""Tools on top of the public API: demo, benchmarks, evaluations, soak and load tests."""

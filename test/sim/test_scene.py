@@ -1,0 +1,185 @@
+"""Tests of the stereo scene renderer and its ground truth."""
+
+from __future__ import annotations
+
+import cv2
+from domplane_ros.core import prior
+from domplane_ros.sim import scene
+import numpy as np
+import pytest
+
+SETUP = scene.CameraSetup(focal_px=320.0, baseline_over_height=0.2, tilt_deg=30.0,
+                          vergence_deg=1.0, width=320, height=240)
+BOXES = (scene.Box(x=0.2, z=2.5, width=0.5, depth=0.4, height=0.5, yaw_deg=20.0),
+         scene.Box(x=-1.0, z=4.5, width=0.8, depth=0.7, height=0.8, yaw_deg=-10.0))
+
+
+def _warp_right_to_left(frame: scene.StereoFrame) -> np.ndarray:
+    """Warp the right image into the left view with the true floor homography."""
+    height, width = frame.left.shape
+    return cv2.warpPerspective(frame.right, frame.homography, (width, height),
+                               flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
+
+
+def _interior(shape: tuple[int, int], margin: int) -> np.ndarray:
+    inside = np.zeros(shape, bool)
+    inside[margin:-margin, margin:-margin] = True
+    return inside
+
+
+def _erode(mask: np.ndarray, px: int) -> np.ndarray:
+    kernel = np.ones((2 * px + 1, 2 * px + 1), np.uint8)
+    return cv2.erode(mask.astype(np.uint8), kernel).astype(bool)
+
+
+def test_homography_is_the_prior_model():
+    for setup in (SETUP, scene.CameraSetup(850.0, 0.05, 12.0, -2.0, 640, 480)):
+        np.testing.assert_allclose(
+            setup.homography(),
+            prior.plane_homography(setup.focal_px, setup.baseline_over_height, setup.tilt_deg,
+                                   setup.vergence_deg, setup.width, setup.height))
+    frame = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
+    np.testing.assert_allclose(frame.homography, SETUP.homography())
+
+
+@pytest.mark.parametrize('floor', scene.FLOOR_KINDS)
+@pytest.mark.parametrize('background', scene.BACKGROUNDS)
+def test_floor_matches_after_warp_and_boxes_do_not(floor, background):
+    # The wall is close enough to be seen above the far floor.
+    frame = scene.render_stereo(SETUP, BOXES, floor=floor, noise_std=0.0, seed=3,
+                                background=background, wall_distance=5.0)
+    if background == 'wall':
+        assert np.mean(~frame.plane_left & ~frame.obstacle_left) > 0.02
+    warped = _warp_right_to_left(frame).astype(np.float64)
+    diff = np.abs(warped - frame.left)
+    inside = _interior(frame.left.shape, 4)
+    # Stay a couple of pixels away from the occlusion boundaries, where bilinear warping mixes
+    # box and floor pixels.
+    plane = _erode(frame.plane_left & frame.visible_in_right, 2) & inside
+    obstacle = _erode(frame.obstacle_left, 2) & inside
+    assert plane.sum() > 0.3 * plane.size
+    assert obstacle.sum() > 500
+    plane_diff = diff[plane].mean()
+    obstacle_diff = diff[obstacle].mean()
+    assert plane_diff < 2.5, plane_diff
+    assert obstacle_diff > 8.0 * plane_diff, (plane_diff, obstacle_diff)
+    # Most floor pixels match to a few grey levels, most box pixels do not.
+    assert np.mean(diff[plane] < 6.0) > 0.9
+    assert np.mean(diff[obstacle] > 6.0) > 0.6
+
+
+def test_ground_truth_masks_are_consistent():
+    frame = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
+    assert frame.left.shape == frame.right.shape == (SETUP.height, SETUP.width)
+    assert frame.left.dtype == frame.right.dtype == np.uint8
+    for mask in (frame.plane_left, frame.visible_in_right, frame.obstacle_left):
+        assert mask.shape == frame.left.shape and mask.dtype == bool
+    assert not np.any(frame.plane_left & frame.obstacle_left)
+    assert not np.any(frame.visible_in_right & ~frame.plane_left)
+    # Floor pixels whose true right position leaves the right image are not visible in it.
+    ys, xs = np.nonzero(frame.plane_left)
+    mapped = frame.homography @ np.stack([xs, ys, np.ones_like(xs)])
+    rx, ry = mapped[0] / mapped[2], mapped[1] / mapped[2]
+    outside = (rx < 0) | (rx > SETUP.width - 1) | (ry < 0) | (ry > SETUP.height - 1)
+    assert outside.any()
+    assert not frame.visible_in_right[ys[outside], xs[outside]].any()
+    # Some floor pixels inside the right image are hidden behind a box from the right camera.
+    hidden = frame.plane_left & ~frame.visible_in_right
+    assert np.count_nonzero(hidden[ys[~outside], xs[~outside]]) > 20
+
+
+def test_occluded_floor_does_not_match():
+    setup = scene.CameraSetup(320.0, 0.4, 30.0, 0.0, 320, 240)
+    boxes = (scene.Box(x=0.0, z=2.2, width=0.5, depth=0.5, height=0.7),)
+    frame = scene.render_stereo(setup, boxes, floor='random', noise_std=0.0)
+    ys, xs = np.nonzero(frame.plane_left)
+    mapped = frame.homography @ np.stack([xs, ys, np.ones_like(xs)])
+    rx, ry = mapped[0] / mapped[2], mapped[1] / mapped[2]
+    inside = (rx >= 2) & (rx <= setup.width - 3) & (ry >= 2) & (ry <= setup.height - 3)
+    occluded = np.zeros_like(frame.plane_left)
+    occluded[ys[inside], xs[inside]] = True
+    occluded &= ~frame.visible_in_right
+    occluded = _erode(occluded, 2)
+    assert occluded.sum() > 200
+    diff = np.abs(_warp_right_to_left(frame).astype(np.float64) - frame.left)
+    assert diff[occluded].mean() > 10.0
+
+
+def test_gain_and_offset_apply_to_the_right_camera():
+    plain = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
+    shifted = scene.render_stereo(SETUP, BOXES, noise_std=0.0, gain=1.2, offset=-15.0)
+    np.testing.assert_array_equal(plain.left, shifted.left)
+    expected = np.clip(np.rint(1.2 * plain.right.astype(np.float64) - 15.0), 0, 255)
+    assert np.abs(shifted.right - expected).max() <= 2.0
+
+
+def test_noise_has_the_requested_std():
+    clean = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
+    noisy = scene.render_stereo(SETUP, BOXES, noise_std=3.0)
+    residual = noisy.left.astype(np.float64) - clean.left
+    assert 2.6 < residual.std() < 3.4
+    assert abs(residual.mean()) < 0.2
+
+
+def test_blur_smooths_the_images():
+    sharp = scene.render_stereo(SETUP, BOXES, noise_std=0.0, blur_sigma=0.0)
+    blurred = scene.render_stereo(SETUP, BOXES, noise_std=0.0, blur_sigma=1.5)
+
+    def gradient_energy(image: np.ndarray) -> float:
+        return float(np.abs(np.diff(image.astype(np.float64), axis=1)).mean())
+
+    assert gradient_energy(blurred.left) < 0.8 * gradient_energy(sharp.left)
+
+
+def test_render_is_deterministic_by_seed():
+    a = scene.random_scene(5, width=320, height=240)
+    b = scene.random_scene(5, width=320, height=240)
+    c = scene.random_scene(6, width=320, height=240)
+    np.testing.assert_array_equal(a.left, b.left)
+    np.testing.assert_array_equal(a.right, b.right)
+    np.testing.assert_array_equal(a.plane_left, b.plane_left)
+    assert a.setup == b.setup and a.boxes == b.boxes
+    assert not np.array_equal(a.left, c.left)
+
+
+def test_random_scenes_are_within_the_prior_ranges():
+    for seed in range(6):
+        frame = scene.random_scene(seed, width=320, height=240)
+        setup = frame.setup
+        for name, (low, high) in scene.SETUP_RANGES.items():
+            assert low <= getattr(setup, name) <= high
+        assert 1 <= len(frame.boxes) <= 5
+        assert frame.obstacle_left.any()
+        assert frame.plane_left.mean() > 0.2
+        # The floor is the dominant surface.
+        assert frame.obstacle_left.sum() < frame.plane_left.sum()
+
+
+def test_sequence_moves_the_head_and_keeps_the_model():
+    frames = scene.scene_sequence(4, seed=2, width=160, height=120, step=0.1)
+    assert len(frames) == 4
+    for frame in frames:
+        np.testing.assert_allclose(frame.homography, frame.setup.homography())
+    # The texture moves under the head from frame to frame.
+    assert not np.array_equal(frames[0].left, frames[1].left)
+    assert frames[0].head_pose != frames[1].head_pose
+    # Boxes are fixed in the world, so they come closer as the head walks forward.
+    if frames[0].boxes:
+        assert frames[-1].boxes[0].z < frames[0].boxes[0].z
+    # Tilt and vergence wobble, so the homography changes.
+    assert not np.allclose(frames[0].homography, frames[-1].homography)
+
+
+def test_bad_arguments_raise_value_error():
+    with pytest.raises(ValueError, match='floor'):
+        scene.render_stereo(SETUP, floor='carpet')
+    with pytest.raises(ValueError, match='background'):
+        scene.render_stereo(SETUP, background='sea')
+    with pytest.raises(ValueError, match='positive'):
+        scene.Box(0.0, 2.0, -1.0, 1.0, 1.0)
+    with pytest.raises(ValueError, match='focal_px'):
+        scene.CameraSetup(0.0, 0.1, 20.0, 0.0)
+    with pytest.raises(ValueError, match='finite'):
+        scene.CameraSetup(500.0, float('nan'), 20.0, 0.0)
+    with pytest.raises(ValueError, match='n_frames'):
+        scene.scene_sequence(0, seed=0)

@@ -1,0 +1,168 @@
+"""Active head: lock states, temporal prediction, re-lock and the search budget.
+
+Short rendered sequences (:func:`domplane_ros.sim.scene.head_sequence`) of a head panning and
+tilting at 60 deg/s (30 Hz) with vergence changes; every check is against the rendered truth.
+The full 300-frame runs per speed are in ``python -m domplane_ros.tools.evaluate_head``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.sim.scene import head_sequence, HeadMotion
+from domplane_ros.stream.pipeline import LOCKED, PlanePipeline, SEARCHING, TRACKING
+from domplane_ros.tools.evaluate_head import dropout_frames, floor_points, method_config
+from domplane_ros.tools.evaluate_head import relock_runs
+from domplane_ros.tools.evaluate_head import transfer_error_px
+import numpy as np
+import pytest
+
+N_FRAMES = 22
+STEP_NS = 33_333_333
+
+
+@pytest.fixture(scope='module')
+def fast_sequence():
+    """22 frames at 60 deg/s pan and tilt (2 degrees per frame), 12 deg/s vergence."""
+    frames = list(head_sequence(N_FRAMES, 1, HeadMotion.at_speed(60.0), floor='random',
+                                supersample=1))
+    return [(f, floor_points(f)) for f in frames]
+
+
+def _run(pipeline, sequence, blank_at=(), reset_at=()):
+    out = []
+    for i, (frame, points) in enumerate(sequence):
+        left, right = frame.left, frame.right
+        if i in blank_at:
+            left = np.full_like(left, 128)
+            right = np.full_like(right, 128)
+        result = pipeline.process(left, right, i * STEP_NS, reset=i in reset_at)
+        out.append((result, transfer_error_px(result.homography, frame, points)))
+    return out
+
+
+def _locked(result, error):
+    return result.ok and error < 1.0
+
+
+def test_head_sequence_truth_follows_tilt_and_vergence_only():
+    motion = HeadMotion(pan_rate_deg_s=45.0, tilt_rate_deg_s=0.0, vergence_rate_deg_s=0.0)
+    a, b = head_sequence(2, 3, motion, width=160, height=120, focal_px=150.0,
+                         supersample=1)
+    assert np.allclose(a.homography, b.homography)  # pan about the vertical: same plane
+    assert np.mean(np.abs(a.left.astype(float) - b.left)) > 5  # but the view moved
+    motion = HeadMotion.at_speed(30.0)
+    pans = [motion.angles(i)[0] for i in range(31)]
+    assert pans[30] - pans[0] == pytest.approx(30.0)
+    tilts = np.array([motion.angles(i)[1] for i in range(300)])
+    assert 15.0 - 1e-9 <= tilts.min() and tilts.max() <= 45.0 + 1e-9
+    assert np.max(np.abs(np.diff(tilts))) * 30.0 <= 30.0 + 1e-6  # peak tilt speed
+    with pytest.raises(ValueError, match='inverted'):
+        HeadMotion(tilt_range_deg=(40.0, 20.0))
+
+
+def test_prediction_keeps_the_lock_where_the_last_homography_loses_it(fast_sequence):
+    predicted = _run(PlanePipeline(method_config('prediction')), fast_sequence)
+    last_only = _run(PlanePipeline(method_config('last')), fast_sequence)
+    first = next(i for i, (r, e) in enumerate(predicted) if _locked(r, e))
+    assert first <= 2  # the spread-out initial search
+    assert all(_locked(r, e) for r, e in predicted[first:]), [
+        (i, r.state, round(e, 2)) for i, (r, e) in enumerate(predicted)]
+    assert all(r.warm_start == 'prediction' for r, _ in predicted[first + 1:])
+    assert all(r.state == LOCKED for r, _ in predicted[first:])
+    # The same frames with the last homography as the warm start: the lock is lost (no plane,
+    # or a plane 1 px or more from the truth) in some frames.
+    lost = [i for i, (r, e) in enumerate(last_only) if i > first and not _locked(r, e)]
+    assert len(lost) >= 3, [(i, r.state, round(e, 2)) for i, (r, e) in enumerate(last_only)]
+
+
+def test_relock_within_five_frames_after_a_forced_loss(fast_sequence):
+    blank = 8
+    results = _run(PlanePipeline(), fast_sequence, blank_at=(blank,))
+    states = [r.state for r, _ in results]
+    assert not results[blank][0].ok
+    assert states[blank] == TRACKING  # the plane is carried forward, not yet searched for
+    flags = [_locked(r, e) for r, e in results]
+    runs = relock_runs(flags)
+    assert runs and max(runs) <= 5, (runs, states)
+    assert all(flags[blank + max(runs):])
+
+
+def test_a_longer_drop_out_goes_tracking_then_searching_and_relocks(fast_sequence):
+    blanks = (8, 9, 10)  # longer than pipeline.max_tracking_frames (2)
+    results = _run(PlanePipeline(), fast_sequence, blank_at=blanks)
+    states = [r.state for r, _ in results]
+    assert states[8:11] == [TRACKING, TRACKING, SEARCHING], states
+    flags = [_locked(r, e) for r, e in results]
+    runs = relock_runs(flags)
+    assert len(runs) == 1 and runs[0] <= 5, (runs, states)
+    assert all(flags[8 + runs[0]:])
+    budget = PlaneNodeConfig().pipeline.search_candidates_per_frame
+    assert max(r.candidates for r, _ in results) <= budget
+
+
+def test_relock_after_a_reset_goes_through_the_search(fast_sequence):
+    reset = 10
+    results = _run(PlanePipeline(), fast_sequence[:16], reset_at=(reset,))
+    assert results[reset][0].state == SEARCHING and results[reset][0].reinitialised
+    flags = [_locked(r, e) for r, e in results]
+    relock = next(i for i in range(reset, len(flags)) if flags[i])
+    assert relock - reset + 1 <= 5
+    assert results[relock][0].warm_start == 'search'
+
+
+@pytest.mark.parametrize('budget', [1, 2])
+def test_search_budget_bounds_the_candidates_refined_per_frame(fast_sequence, budget):
+    base = PlaneNodeConfig()
+    config = replace(base, pipeline=replace(base.pipeline, search_candidates_per_frame=budget))
+    pipeline = PlanePipeline(config)
+    results = _run(pipeline, fast_sequence[:8])
+    per_frame = [r.candidates for r, _ in results]
+    assert max(per_frame) <= budget
+    refine_best = base.prior.refine_best
+    frames_to_lock = -(-refine_best // budget)
+    # The search is spread: no plane until refine_best candidates were tried, then the best.
+    assert [r.state for r, _ in results[:frames_to_lock - 1]] == [SEARCHING] * (
+        frames_to_lock - 1)
+    assert all(not r.ok for r, _ in results[:frames_to_lock - 1])
+    assert sum(per_frame[:frames_to_lock]) == refine_best
+    result, error = results[frames_to_lock - 1]
+    assert result.ok and error < 1.0, (result.reason, error)
+    assert sum(per_frame[frames_to_lock:]) == 0  # locked: no more prior candidates
+
+
+def test_fast_joint_hint_widens_the_basin_of_the_last_homography(fast_sequence):
+    """Without tracking, the joint hint's wide first pass keeps the lock at 60 deg/s."""
+    hinted = []
+    plain = []
+    for out, speed in ((hinted, 1.0), (plain, None)):
+        pipeline = PlanePipeline(method_config('last'))
+        for i, (frame, points) in enumerate(fast_sequence):
+            result = pipeline.process(frame.left, frame.right, i * STEP_NS, joint_speed=speed)
+            out.append(_locked(result, transfer_error_px(result.homography, frame, points)))
+    first = hinted.index(True)
+    assert all(hinted[first:]), hinted
+    assert plain.count(False) > hinted.count(False) + 3, (plain, hinted)
+
+
+def test_joint_speed_hint_is_reported_and_validated(fast_sequence):
+    pipeline = PlanePipeline()
+    frame, _ = fast_sequence[0]
+    fast = pipeline.process(frame.left, frame.right, 0, joint_speed=2.0)
+    slow = pipeline.process(frame.left, frame.right, STEP_NS, joint_speed=0.1)
+    none = pipeline.process(frame.left, frame.right, 2 * STEP_NS)
+    assert fast.fast_motion and not slow.fast_motion and not none.fast_motion
+    with pytest.raises(ValueError, match='joint_speed'):
+        pipeline.process(frame.left, frame.right, 3 * STEP_NS, joint_speed=float('nan'))
+
+
+def test_relock_runs_counts_frames_between_losses_and_relocks():
+    assert relock_runs([False, False, True, True]) == []
+    assert relock_runs([True, False, False, True, False, True]) == [2, 1]
+    assert relock_runs([True, True, False, False]) == [2]
+    # Drop-out frames (blank input) do not count: re-lock frames after the input came back.
+    assert relock_runs([True, False, False, False, True],
+                       [False, True, True, False, False]) == [1]
+    assert relock_runs([True, False, True], [False, True, False]) == [0]
+    assert dropout_frames(10, 4, (1, 2)) == {2, 6, 7}
