@@ -31,8 +31,8 @@ above 0.17 (shifted 5-80 px, a cut, a prior candidate, a swapped-pair plane), 90
 planes scored above 0.20 (median 0.46); 57 of 620 exact period look-alikes scored above 0.20
 and 11 above 0.30. The score is comparable between planes on the same pair: the true plane
 outscored every wrong plane of its scene, look-alikes included, in 198 of 200 scenes, so a
-search should rank its candidates by the score; an absolute threshold alone cannot reject a plane one period off
-on a perfectly periodic floor, which matches that floor everywhere.
+search should rank its candidates by the score; an absolute threshold alone cannot reject a
+plane one period off on a perfectly periodic floor, which matches that floor everywhere.
 
 :func:`swap_evidence` checks the other way round: whether a plane that verifies well was found
 for swapped cameras. For a ground plane seen by a correctly ordered head the plane's disparity
