@@ -17,14 +17,14 @@ import numpy as np
 
 
 @dataclass(frozen=True)
-class PointScene:
-    """Left and right points with the truth.
+class _SceneTruth:
+    """Left and right features with the truth.
 
     Attributes:
-        left: (N, 2) float64 left points.
-        right: (M, 2) float64 right points, shuffled (no correspondence by index).
+        left: (N, K) float64 left features.
+        right: (M, K) float64 right features, shuffled (no correspondence by index).
         homography: (3, 3) float64 true plane homography, left to right.
-        on_plane: (N,) bool, left points that lie on the plane.
+        on_plane: (N,) bool, left features that lie on the plane.
         width: Image width in pixels.
         height: Image height in pixels.
 
@@ -36,6 +36,15 @@ class PointScene:
     on_plane: np.ndarray
     width: int
     height: int
+
+
+@dataclass(frozen=True)
+class PointScene(_SceneTruth):
+    """Left and right points with the truth.
+
+    ``left`` is (N, 2) float64, ``right`` (M, 2) float64 and shuffled, ``on_plane`` marks the
+    left points on the plane; the other attributes are those of every scene with truth.
+    """
 
 
 def random_plane_homography(rng: np.random.Generator, width: int = 640,
@@ -131,26 +140,13 @@ def plane_error_px(estimate: np.ndarray, truth: np.ndarray, points: np.ndarray) 
 
 
 @dataclass(frozen=True)
-class LineScene:
+class LineScene(_SceneTruth):
     """Left and right line segments with the truth.
 
-    Attributes:
-        left: (N, 4) float64 left segments ``(x1, y1, x2, y2)``.
-        right: (M, 4) float64 right segments, shuffled, with endpoints that do not correspond
-            to the left ones (each right segment is a random part of the mapped line).
-        homography: (3, 3) float64 true plane homography, left to right.
-        on_plane: (N,) bool, left segments that lie on the plane.
-        width: Image width in pixels.
-        height: Image height in pixels.
-
+    ``left`` is (N, 4) float64 segments ``(x1, y1, x2, y2)``; ``right`` is (M, 4) float64,
+    shuffled, with endpoints that do not correspond to the left ones (each right segment is a
+    random part of the mapped line); ``on_plane`` marks the left segments on the plane.
     """
-
-    left: np.ndarray
-    right: np.ndarray
-    homography: np.ndarray
-    on_plane: np.ndarray
-    width: int
-    height: int
 
 
 def line_scene(rng: np.random.Generator, n_lines: int = 120, outlier_fraction: float = 0.3,
