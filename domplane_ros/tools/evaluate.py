@@ -21,10 +21,11 @@ Data sets (folders under ``--data``, as in ``../shared/data``; missing ones are 
   homography fitted to the corners.
 * ``opencv_samples/left.jpg, right.jpg`` (books) and ``ensenso_fit_primitive``: no reference;
   inlier counts, mask coverage and how far apart the two methods' homographies are.
-* Rendered scenes (:func:`domplane_ros.sim.scene.random_scene`): solved share (mean transfer error
-  on the visible floor < 1 px), errors, mask scores and times, overall and per floor kind.
-* Rendered sequences (:func:`domplane_ros.sim.scene.scene_sequence`): the warm start as the node
-  uses it, from the previous frame rather than from the same pair.
+* Rendered scenes (:func:`domplane_ros.sim.generators.random_scene`): solved share (mean
+  transfer error on the visible floor < 1 px), errors, mask scores and times, overall and per
+  floor kind.
+* Rendered sequences (:func:`domplane_ros.sim.generators.scene_sequence`): the warm start as
+  the node uses it, from the previous frame rather than from the same pair.
 
 Outputs: the tables on stdout and in ``summary.md``, one CSV per data set,
 ``contact_sheet.png`` (left images with the product's mask) and ``errors.png`` (errors and
