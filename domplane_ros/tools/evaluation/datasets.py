@@ -238,10 +238,10 @@ def evaluate_rendered(n_scenes: int, first_seed: int = 0, repeats: int = 1) -> l
 
     Scene ``seed`` is :func:`random_scene(seed) <domplane_ros.sim.generators.random_scene>` for
     seeds ``first_seed .. first_seed + n_scenes - 1`` (random set-up within
-    :data:`~domplane_ros.sim.generators.SETUP_RANGES`, floor kind, 1-5 boxes, horizon or
-    wall). The error is the mean transfer error over the floor pixels seen by both cameras
-    (every 4th pixel in x and y); the mask is scored with ``plane_left & visible_in_right`` as the plane
-    and ``obstacle_left`` as the obstacles.
+    :data:`~domplane_ros.sim.generators.SETUP_RANGES`, floor kind, 1-5 boxes, horizon or wall). The
+    error is the mean transfer error over the floor pixels seen by both cameras (every 4th pixel in
+    x and y); the mask is scored with ``plane_left & visible_in_right`` as the plane and
+    ``obstacle_left`` as the obstacles.
     """
     config = PlaneNodeConfig(prior=RENDERED_PRIOR)
     cases = []
@@ -258,12 +258,12 @@ def evaluate_streams(n_sequences: int, n_frames: int = 10, first_seed: int = 0
     """Evaluate the warm start as the live node uses it: frame to frame in rendered sequences.
 
     Sequence ``seed`` is :func:`scene_sequence(n_frames, seed)
-    <domplane_ros.sim.generators.scene_sequence>` (a head walking and turning over the floor,
-    tilt and vergence wobbling by up to 1 and 0.3 degrees). One :class:`PlanePipeline`
-    processes the frames in order: the first is a cold start (not reported here; the rendered table covers
-    cold starts), every later one starts from the previous frame's result. Ours gets the
-    frame's time as ``warm_ms``; ORB + MAGSAC runs on every frame on its own. Errors and mask
-    scores as in :func:`evaluate_rendered`.
+    <domplane_ros.sim.generators.scene_sequence>` (a head walking and turning over the floor, tilt
+    and vergence wobbling by up to 1 and 0.3 degrees). One :class:`PlanePipeline` processes the
+    frames in order: the first is a cold start (not reported here; the rendered table covers cold
+    starts), every later one starts from the previous frame's result. Ours gets the frame's time as
+    ``warm_ms``; ORB + MAGSAC runs on every frame on its own. Errors and mask scores as in
+    :func:`evaluate_rendered`.
     """
     config = one_shot_search(PlaneNodeConfig(prior=RENDERED_PRIOR))
     cases = []
