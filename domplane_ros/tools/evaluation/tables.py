@@ -5,7 +5,7 @@ from __future__ import annotations
 import csv
 import math
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Iterator, Sequence
 
 from domplane_ros.config import PriorConfig
 from domplane_ros.sim.textures import FLOOR_KINDS
@@ -80,17 +80,20 @@ def prior_text(prior: PriorConfig, roi: Sequence[float] = (0.0, 0.0, 1.0, 1.0)) 
             f'[{", ".join(f"{v:g}" for v in roi)}] (both methods)')
 
 
+def _by_method(cases: Sequence[Case]) -> Iterator[tuple[Case, str, dict[str, float], str]]:
+    """Yield ``(case, method label, figures, 'inliers/points')`` per case and method."""
+    for case in cases:
+        for method, f in case.figures.items():
+            yield case, METHOD_LABEL[method], f, f'{int(f["inliers"])}/{int(f["points"])}'
+
+
 def kitti_table(cases: Sequence[Case]) -> str:
     """Return the KITTI table."""
     header = ['features', 'method', 'road err px', 'err vs GT disp px', 'road IoU',
               'off-road recall', 'inliers/points', 'ms']
-    rows = []
-    for case in cases:
-        where = 'ROI' if case.dataset == 'kitti' else 'full image'
-        for method, f in case.figures.items():
-            rows.append([where, METHOD_LABEL[method], f['error_px'],
-                         f['error_vs_gt_disparity_px'], f['road_iou'], f['off_road_recall'],
-                         f'{int(f["inliers"])}/{int(f["points"])}', _time_cell(f)])
+    rows = [['ROI' if case.dataset == 'kitti' else 'full image', label, f['error_px'],
+             f['error_vs_gt_disparity_px'], f['road_iou'], f['off_road_recall'], counts,
+             _time_cell(f)] for case, label, f, counts in _by_method(cases)]
     info = cases[0].info
     text = (f'reference: d = {info["a"]:.5f} x + {info["b"]:.5f} y {info["c"]:+.2f} '
             f'({100 * info["within_1px"]:.1f} % of GT pixels within 1 px); road = GT pixels '
@@ -103,15 +106,12 @@ def chessboard_table(cases: Sequence[Case]) -> str:
     """Return the chessboard table (one row per pair and method, then a summary)."""
     header = ['pair', 'method', 'board err px', 'ref floor px', 'prior gap px',
               'inliers/points', 'ms']
-    rows = []
-    for case in cases:
-        for method, f in case.figures.items():
-            rows.append([case.pair, METHOD_LABEL[method], f['error_px'],
-                         case.info['reference_floor_px'], case.info['prior_gap_px'],
-                         f'{int(f["inliers"])}/{int(f["points"])}', _time_cell(f)])
+    rows = [[case.pair, label, f['error_px'], case.info['reference_floor_px'],
+             case.info['prior_gap_px'], counts, _time_cell(f)]
+            for case, label, f, counts in _by_method(cases)]
     summary = []
     for method in ('ours', 'orb_magsac'):
-        errors = np.array([c.figures[method]['error_px'] for c in cases])
+        errors = _errors(cases, method)
         under = int(np.count_nonzero(errors < CHESSBOARD_TARGET_PX))
         summary.append([METHOD_LABEL[method], f'{under}/{len(cases)}',
                         float(np.median(errors)), float(np.max(errors)),
@@ -132,19 +132,14 @@ def qualitative_table(cases: Sequence[Case]) -> str:
     """Return the table of the pairs without reference."""
     header = ['pair', 'method', 'inliers/points', 'plane share', 'obstacle share',
               'methods apart px', 'ms']
-    rows = []
-    for case in cases:
-        for method, f in case.figures.items():
-            rows.append([case.pair, METHOD_LABEL[method],
-                         f'{int(f["inliers"])}/{int(f["points"])}'
-                         + ('' if f['ok'] else ' (failed)'),
-                         f['plane_fraction'], f['obstacle_fraction'], f['methods_apart_px'],
-                         _time_cell(f)])
+    rows = [[case.pair, label, counts + ('' if f['ok'] else ' (failed)'), f['plane_fraction'],
+             f['obstacle_fraction'], f['methods_apart_px'], _time_cell(f)]
+            for case, label, f, counts in _by_method(cases)]
     return markdown_table(header, rows)
 
 
 def _rendered_summary(cases: Sequence[Case], method: str) -> list[Any]:
-    errors = np.array([c.figures[method]['error_px'] for c in cases])
+    errors = _errors(cases, method)
     solved = float(np.mean(errors < SOLVED_PX))
     iou = np.array([c.figures[method]['plane_iou'] for c in cases])
     recall = np.array([c.figures[method]['obstacle_recall'] for c in cases])
@@ -191,13 +186,17 @@ def speed_line(name: str, cases: Sequence[Case]) -> str:
                         for label, ms in ours))
 
 
+def _errors(cases: Sequence[Case], method: str = 'ours') -> np.ndarray:
+    """Return a method's ``error_px`` per case, (N,) float64."""
+    return np.array([c.figures[method]['error_px'] for c in cases])
+
+
 def targets(groups: dict[str, list[Case]]) -> list[str]:
     """Return one verdict line per target: rendered, KITTI, chessboards, speed per data set."""
     lines = []
     rendered = groups.get('rendered', [])
     if rendered:
-        errors = np.array([c.figures['ours']['error_px'] for c in rendered])
-        solved = float(np.mean(errors < SOLVED_PX))
+        solved = float(np.mean(_errors(rendered) < SOLVED_PX))
         lines.append(f'rendered: {100 * solved:.0f} % solved from a cold start (target '
                      f'{100 * RENDERED_TARGET_SOLVED:.0f} %): '
                      + ('met' if solved >= RENDERED_TARGET_SOLVED else 'MISSED'))
@@ -207,31 +206,32 @@ def targets(groups: dict[str, list[Case]]) -> list[str]:
                      + ('met' if err < KITTI_TARGET_PX else 'MISSED'))
     boards = groups.get('chessboards', [])
     if boards:
-        errors = np.array([c.figures['ours']['error_px'] for c in boards])
-        under = int(np.count_nonzero(errors < CHESSBOARD_TARGET_PX))
+        under = int(np.count_nonzero(_errors(boards) < CHESSBOARD_TARGET_PX))
         lines.append(f'chessboards: {under}/{len(boards)} pairs under '
                      f'{CHESSBOARD_TARGET_PX:g} px (target: all): '
                      + ('met' if under == len(boards) else 'MISSED'))
-    for name, cases in groups.items():
-        if not cases:
-            continue
-        orb, ours = _speed(cases)
-        verdict = []
-        if 'error_px' in cases[0].figures['ours']:
-            ours_err = np.median([c.figures['ours']['error_px'] for c in cases])
-            orb_err = np.median([c.figures['orb_magsac']['error_px'] for c in cases])
-            accurate = bool(ours_err <= orb_err)
-            verdict.append(f'median error ours {fmt(float(ours_err))} vs ORB '
-                           f'{fmt(float(orb_err))} px '
-                           + ('(equal or better)' if accurate else '(WORSE)'))
-        else:
-            accurate = None
-            verdict.append('no reference')
-        for label, value in ours:
-            ratio = orb / value
-            ok = ratio >= SPEED_TARGET and accurate is not False
-            verdict.append(f'{label}: ORB / ours time = {ratio:.2f}'
-                           + ('' if accurate is None else (' met' if ok else ' MISSED')))
-        lines.append(f'speed {name} (target >= {SPEED_TARGET:g}x at equal or better '
-                     f'accuracy): ' + '; '.join(verdict))
+    lines += [_speed_verdict(name, cases) for name, cases in groups.items() if cases]
     return lines
+
+
+def _speed_verdict(name: str, cases: Sequence[Case]) -> str:
+    """Return the speed target's verdict on a data set: time ratios at equal accuracy."""
+    orb, ours = _speed(cases)
+    verdict = []
+    if 'error_px' in cases[0].figures['ours']:
+        ours_err = np.median(_errors(cases))
+        orb_err = np.median(_errors(cases, 'orb_magsac'))
+        accurate = bool(ours_err <= orb_err)
+        verdict.append(f'median error ours {fmt(float(ours_err))} vs ORB '
+                       f'{fmt(float(orb_err))} px '
+                       + ('(equal or better)' if accurate else '(WORSE)'))
+    else:
+        accurate = None
+        verdict.append('no reference')
+    for label, value in ours:
+        ratio = orb / value
+        ok = ratio >= SPEED_TARGET and accurate is not False
+        verdict.append(f'{label}: ORB / ours time = {ratio:.2f}'
+                       + ('' if accurate is None else (' met' if ok else ' MISSED')))
+    return (f'speed {name} (target >= {SPEED_TARGET:g}x at equal or better '
+            f'accuracy): ' + '; '.join(verdict))
