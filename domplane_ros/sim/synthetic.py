@@ -174,25 +174,7 @@ def line_scene(rng: np.random.Generator, n_lines: int = 120, outlier_fraction: f
 
     """
     h = random_plane_homography(rng, width, height) if homography is None else homography
-    segs = []
-    while len(segs) < n_lines:
-        length = rng.uniform(40.0, 220.0)
-        if directions_deg is not None:
-            angle = np.radians(rng.choice(np.asarray(directions_deg, np.float64)))
-        else:
-            angle = rng.uniform(0.0, np.pi)
-        d = np.array([np.cos(angle), np.sin(angle)])
-        if through_point is not None:
-            start = np.asarray(through_point) + rng.uniform(-300.0, 300.0) * d
-        else:
-            start = rng.uniform([0, 0], [width - 1, height - 1])
-        end = start + length * d
-        seg = np.array([start, end])
-        mapped = apply_homography(h, seg)
-        if (np.all((seg >= 0) & (seg <= [width - 1, height - 1]))
-                and np.all((mapped >= 0) & (mapped <= [width - 1, height - 1]))):
-            segs.append(seg.ravel())
-    left = np.array(segs)
+    left = _left_segments(rng, h, n_lines, width, height, directions_deg, through_point)
     right = apply_homography(h, left.reshape(-1, 2)).reshape(-1, 4)
     on_plane = rng.random(n_lines) >= outlier_fraction
     n_off = int(np.count_nonzero(~on_plane))
@@ -214,3 +196,28 @@ def line_scene(rng: np.random.Generator, n_lines: int = 120, outlier_fraction: f
     right = right[rng.permutation(right.shape[0])]
     return LineScene(left=left[~only_right], right=right, homography=h,
                      on_plane=on_plane[~only_right], width=width, height=height)
+
+
+def _left_segments(rng: np.random.Generator, h: np.ndarray, n_lines: int, width: int,
+                   height: int, directions_deg: np.ndarray | None,
+                   through_point: tuple[float, float] | None) -> np.ndarray:
+    """Return (n_lines, 4) float64 left segments inside both images (mapped by ``h``)."""
+    segs = []
+    while len(segs) < n_lines:
+        length = rng.uniform(40.0, 220.0)
+        if directions_deg is not None:
+            angle = np.radians(rng.choice(np.asarray(directions_deg, np.float64)))
+        else:
+            angle = rng.uniform(0.0, np.pi)
+        d = np.array([np.cos(angle), np.sin(angle)])
+        if through_point is not None:
+            start = np.asarray(through_point) + rng.uniform(-300.0, 300.0) * d
+        else:
+            start = rng.uniform([0, 0], [width - 1, height - 1])
+        end = start + length * d
+        seg = np.array([start, end])
+        mapped = apply_homography(h, seg)
+        if (np.all((seg >= 0) & (seg <= [width - 1, height - 1]))
+                and np.all((mapped >= 0) & (mapped <= [width - 1, height - 1]))):
+            segs.append(seg.ravel())
+    return np.array(segs)
