@@ -33,7 +33,9 @@ import cv2
 from domplane_ros.config import load_params_file, PlaneNodeConfig
 from domplane_ros.core.mask import overlay
 from domplane_ros.errors import BagError, ConfigError
-from domplane_ros.replay.cli import ReplayedFrame, ReplaySummary, run_replay
+from domplane_ros.replay.cli import run_replay
+from domplane_ros.replay.reader import ReplayedFrame
+from domplane_ros.replay.report import ReplaySummary
 from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.truth import floor_points, transfer_error_px
@@ -384,7 +386,7 @@ def run_demo(output: Path, n_frames: int = 40, seed: int = DEFAULT_SEED, width: 
 
     Returns:
         A dict with ``frames`` (the :class:`DemoFrame` list), ``summary`` (the replay's
-        :class:`~domplane_ros.replay.cli.ReplaySummary`), ``paths`` (name to written path),
+        :class:`~domplane_ros.replay.report.ReplaySummary`), ``paths`` (name to written path),
         ``removed`` (outputs of an earlier run that were replaced), ``render_s`` and
         ``paragraph`` (the printed summary).
 

@@ -24,7 +24,7 @@ import sys
 import time
 
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.replay.cli import ReplaySession
+from domplane_ros.replay.reader import ReplaySession
 from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
