@@ -17,7 +17,9 @@ from typing import Sequence
 
 import cv2
 from domplane_ros.core.homography import apply_homography
-from domplane_ros.sim.scene import scene_sequence, StereoFrame
+from domplane_ros.sim.generators import scene_sequence
+from domplane_ros.sim.model import StereoFrame
+from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
 import numpy as np
 
 
@@ -156,14 +158,10 @@ def cut_sequence(n_before: int, n_after: int, seed: int, width: int = 640, heigh
     return list(first) + list(second)
 
 
-def plane_error_px(frame: StereoFrame, homography: np.ndarray) -> float:
+def plane_error_px(frame: StereoFrame, homography: np.ndarray | None) -> float:
     """Return the mean transfer distance to the truth over the visible floor, pixels."""
-    pts = np.argwhere(frame.plane_left & frame.visible_in_right)[:, ::-1].astype(np.float64)
-    if pts.shape[0] == 0:
-        return math.nan
-    pts = pts[::max(1, pts.shape[0] // 4000)]
-    diff = apply_homography(homography, pts) - apply_homography(frame.homography, pts)
-    return float(np.mean(np.linalg.norm(diff, axis=1)))
+    pixels = every_floor_pixel(frame)
+    return transfer_error_px(homography, frame, pixels[::max(1, pixels.shape[0] // 4000)])
 
 
 def _maps_inside(h: np.ndarray, width: int, height: int) -> np.ndarray:

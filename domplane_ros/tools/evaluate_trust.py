@@ -29,13 +29,14 @@ import sys
 import time
 from typing import Callable, Sequence
 
-import cv2
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, rough_rig,
                                    swapped)
-from domplane_ros.sim.scene import random_scene, StereoFrame
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.model import StereoFrame
 from domplane_ros.stream.pipeline import PlanePipeline
-from domplane_ros.tools.evaluate import one_shot_search, progress, run_orb_magsac
+from domplane_ros.tools.common import machine_name, one_core, progress
+from domplane_ros.tools.evaluation.methods import one_shot_search, run_orb_magsac
 import numpy as np
 
 CORRECT_PX = 1.0
@@ -147,13 +148,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--no-orb', action='store_true', help='skip the ORB + MAGSAC baseline')
     parser.add_argument('--out', type=Path, default=None, help='write summary.md here too')
     args = parser.parse_args(argv)
-    cv2.setNumThreads(1)
     first = 1000 if args.held_out else 0
     seeds = list(range(first, first + args.pairs))
     config = PlaneNodeConfig()
-    tallies = _single_cases(seeds, one_shot_search(config), not args.no_orb)
-    tallies[('cuts', 'ours')] = _cut_case(seeds[:max(1, args.pairs // 4)], config)
-    lines = [f'seeds {seeds[0]}..{seeds[-1]} ({"held out" if args.held_out else "tuning"}); '
+    with one_core():
+        tallies = _single_cases(seeds, one_shot_search(config), not args.no_orb)
+        tallies[('cuts', 'ours')] = _cut_case(seeds[:max(1, args.pairs // 4)], config)
+    lines = [f'machine: {machine_name()}', f'seeds {seeds[0]}..{seeds[-1]} ({"held out" if args.held_out else "tuning"}); '
              'prior: the documented default; correct < 1 px, wrong > 5 px',
              '', '| case | method | pairs | published | correct | wrong | precision | '
              'recall | re-lock (max pairs) | median ms |', '|' + '---|' * 10]
