@@ -14,7 +14,7 @@ peak, then ``cv2.cornerSubPix``).
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import cv2
 from domplane_ros.config import FeatureConfig
@@ -26,6 +26,33 @@ import numpy as np
 _MIN_RESPONSE = 1e-7
 # Three iterations are enough: the start is within a pixel of the corner (measured).
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 3, 0.1)
+
+
+class Features(NamedTuple):
+    """One stereo pair's features (no correspondences between the images).
+
+    Attributes:
+        left_points: (N, 2) float64 left corners ``(x, y)``.
+        right_points: (M, 2) float64 right corners.
+        left_lines: (K, 4) float64 left segments ``(x1, y1, x2, y2)``.
+        right_lines: (L, 4) float64 right segments.
+
+    """
+
+    left_points: np.ndarray
+    right_points: np.ndarray
+    left_lines: np.ndarray
+    right_lines: np.ndarray
+
+    @property
+    def n_left(self) -> int:
+        """Return the number of left features (corners plus segments)."""
+        return int(self.left_points.shape[0] + self.left_lines.shape[0])
+
+    @property
+    def n_right(self) -> int:
+        """Return the number of right features (corners plus segments)."""
+        return int(self.right_points.shape[0] + self.right_lines.shape[0])
 
 
 def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, int, int, int]:
