@@ -47,7 +47,7 @@ from typing import Any, Sequence
 
 import cv2
 from domplane_ros.config import FeatureConfig
-from domplane_ros.core.features import roi_to_pixels
+from domplane_ros.core.features import grid_round_robin, roi_to_pixels
 from domplane_ros.core.homography import apply_homography, similarity_normaliser
 from domplane_ros.core.image import check_gray
 import numpy as np
@@ -185,13 +185,7 @@ def detect_lines(gray: np.ndarray, config: FeatureConfig,
     cols = config.grid_cols
     cell = (np.clip((mid_y * rows // (y1 - y0)).astype(np.int64), 0, rows - 1) * cols
             + np.clip((mid_x * cols // (x1 - x0)).astype(np.int64), 0, cols - 1))
-    order = np.lexsort((-length, cell))
-    sorted_cell = cell[order]
-    first = np.searchsorted(sorted_cell, sorted_cell, side='left')
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size) - first
-    chosen = np.lexsort((-length, rank))[:config.max_lines]
-    return seg[chosen]
+    return seg[grid_round_robin(length, cell, config.max_lines)]
 
 
 class LineMatcher:

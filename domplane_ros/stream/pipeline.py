@@ -238,8 +238,7 @@ class PlanePipeline:
         t2 = time.perf_counter()
         step = self._estimate(feats, left.shape, motions, fast)
         t3 = time.perf_counter()
-        estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
-        h, mask = self._publish(step, estimate, left, right, feats)
+        estimate, h, mask = self._publish(step, left, right, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
             self.checks.counts['too_few_features'] += 1
@@ -247,13 +246,11 @@ class PlanePipeline:
         if not step.keep_previous:
             self._previous = _Previous(left.copy(), right.copy(), *track_pts)
         t4 = time.perf_counter()
-        timings = {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
-                   'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3),
-                   'total': 1e3 * (t4 - t0)}
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
                            estimate=estimate, left_points=feats.left_points,
                            right_points=feats.right_points, reinitialised=step.reinitialised,
-                           reason=reason, state=self._state, timings_ms=timings,
+                           reason=reason, state=self._state,
+                           timings_ms=_timings_ms(t0, t1, t2, t3, t4),
                            warnings=check.warnings, left_lines=feats.left_lines,
                            right_lines=feats.right_lines, warm_start=step.warm_start,
                            prediction=step.prediction, candidates=step.candidates,
@@ -274,9 +271,10 @@ class PlanePipeline:
             self._search_step(step, feats, problem, size, motions)
         return step
 
-    def _publish(self, step: _Step, estimate: PlaneEstimate | FailedEstimate, left: np.ndarray,
-                 right: np.ndarray, feats: Features) -> tuple[np.ndarray | None, np.ndarray]:
-        """Return the homography and the mask of the frame; keep an accepted plane."""
+    def _publish(self, step: _Step, left: np.ndarray, right: np.ndarray, feats: Features
+                 ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray]:
+        """Return the frame's estimate, homography and mask; keep an accepted plane."""
+        estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
         if step.accepted:
             h = estimate.homography
             mask = plane_mask(left, right, h, self.config.mask)
@@ -287,7 +285,7 @@ class PlanePipeline:
             h = None
             mask = np.zeros(left.shape, np.uint8)
             self.stats.failed += 1
-        return h, mask
+        return estimate, h, mask
 
     def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
                  warnings: tuple[str, ...], t0: float, fast: bool) -> FrameResult:
@@ -646,6 +644,12 @@ def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig) -> Featur
         left_seg = detect_lines(left, cfg.features)
         right_seg = detect_lines(right, cfg.features)
     return Features(left_pts, right_pts, left_seg, right_seg)
+
+
+def _timings_ms(t0: float, t1: float, t2: float, t3: float, t4: float) -> dict[str, float]:
+    """Return the milliseconds of the features, tracking, estimate and mask, and the total."""
+    return {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
+            'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3), 'total': 1e3 * (t4 - t0)}
 
 
 def _check_frame(left: np.ndarray, right: np.ndarray, joint_speed: float | None) -> None:
