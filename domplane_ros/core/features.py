@@ -85,6 +85,18 @@ def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, i
             int(math.ceil(x1 * width)), int(math.ceil(y1 * height)))
 
 
+def gray_roi(gray: np.ndarray, roi: Sequence[float]) -> tuple[int, int, int, int]:
+    """Check a grey image and return its region of interest in pixels (:func:`roi_to_pixels`).
+
+    Raises:
+        ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
+
+    """
+    check_gray(gray)
+    height, width = gray.shape
+    return roi_to_pixels(roi, width, height)
+
+
 def detect_corners(gray: np.ndarray, config: FeatureConfig,
                    roi: Sequence[float] | None = None) -> np.ndarray:
     """Detect corners spread over a grid of cells, refined to sub-pixel accuracy.
@@ -105,9 +117,8 @@ def detect_corners(gray: np.ndarray, config: FeatureConfig,
         ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
 
     """
-    check_gray(gray)
+    x0, y0, x1, y1 = gray_roi(gray, config.roi if roi is None else roi)
     height, width = gray.shape
-    x0, y0, x1, y1 = roi_to_pixels(config.roi if roi is None else roi, width, height)
     empty = np.zeros((0, 2), np.float64)
     block = int(config.block_size)
     # Candidates keep this far from the image border, so the response window and the

@@ -37,12 +37,30 @@ def as_points(points: object, name: str = 'points') -> np.ndarray:
         ValueError: If the shape is not (N, 2) or the values are not numbers.
 
     """
+    return as_rows(points, 2, name, 'coordinates')
+
+
+def as_rows(values: object, columns: int, name: str, what: str, layout: str = '',
+            empty_ok: bool = False) -> np.ndarray:
+    """Return ``values`` as a ``(N, columns) float64`` array, or raise ``ValueError``.
+
+    Args:
+        values: Anything array-like of shape (N, columns).
+        columns: Values per row.
+        name: Name used in the error messages.
+        what: What the rows are, for the message (``'coordinates'``).
+        layout: The row layout for the shape message (``' (x1, y1, x2, y2)'``), or ``''``.
+        empty_ok: Whether an empty array of any shape gives ``(0, columns)``.
+
+    """
     try:
-        arr = np.asarray(points, dtype=np.float64)
+        arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise ValueError(f'{name} must be numeric (N, 2) coordinates') from err
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f'{name} must have shape (N, 2), got {arr.shape}')
+        raise ValueError(f'{name} must be numeric (N, {columns}) {what}') from err
+    if empty_ok and arr.size == 0:
+        return np.zeros((0, columns), np.float64)
+    if arr.ndim != 2 or arr.shape[1] != columns:
+        raise ValueError(f'{name} must have shape (N, {columns}){layout}, got {arr.shape}')
     return arr
 
 
