@@ -1,13 +1,35 @@
 """Fixtures shared by every test tier; nothing here imports rclpy.
 
 The ROS tests' own fixtures (private rclpy contexts) live in ``test/ros/conftest.py``, so the
-core, stream, replay, sim and tools tests run where rclpy is not installed.
+core, stream, replay, sim and tools tests run where rclpy is not installed:
+``pytest -m 'not ros'`` there leaves test/ros uncollected (without ``-m 'not ros'``, a missing
+rclpy is an error, not a silent skip).
 """
 
 from __future__ import annotations
 
+import importlib.util
+from pathlib import Path
+
 from bag_helpers import make_frames
 import pytest
+
+_ROS_TESTS = Path(__file__).parent / 'ros'
+
+
+def _rclpy_missing() -> bool:
+    try:
+        return importlib.util.find_spec('rclpy') is None
+    except (ImportError, ValueError):
+        return True
+
+
+def pytest_ignore_collect(collection_path: Path, config: pytest.Config) -> bool | None:
+    """Leave test/ros uncollected when its tests are deselected and rclpy is missing."""
+    if (collection_path == _ROS_TESTS and 'not ros' in (config.getoption('markexpr') or '')
+            and _rclpy_missing()):
+        return True
+    return None
 
 
 @pytest.fixture(scope='module')

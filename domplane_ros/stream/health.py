@@ -10,21 +10,25 @@ result. Two objects hold the checks' state:
   dropped). The pipeline adds the checks that need its features and estimate: too few
   features (:func:`texture_note` says why) and inliers with too little spread
   (:func:`inlier_spread`).
-* :class:`StampChecks`, owned by the adapter (node or replay) next to its synchroniser, looks
-  at every message before pairing: zero stamps (a driver that does not stamp its images) and
-  left/right stamps that differ by more than the slop (the synchroniser can never pair them).
+* :class:`StampChecks`, owned by the :class:`~domplane_ros.stream.session.StreamSession` next
+  to its synchroniser, looks at every message before pairing: zero stamps (a driver that does
+  not stamp its images) and left/right stamps that differ by more than the slop (the
+  synchroniser can never pair them).
 
-Both count what they see in :data:`INPUT_COUNTER_NAMES` order; :func:`input_diagnostic_values`
-turns the counts into the ``/diagnostics`` key/values.
+Neither copies configuration: each call is given the limits in force. Every input problem of
+one stream is counted in one :class:`InputCounts` (the session's; the checks, the pipeline
+and the decoder add to it); :func:`input_diagnostic_values` turns counts into the
+``/diagnostics`` key/values.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Iterator, Mapping
 
 import cv2
+from domplane_ros.config import PipelineConfig
 from domplane_ros.errors import DECODE_ERROR_KINDS
 import numpy as np
 
@@ -56,6 +60,45 @@ def new_counts() -> dict[str, int]:
     return dict.fromkeys(INPUT_COUNTER_NAMES, 0)
 
 
+class InputCounts(Mapping[str, int]):
+    """The input problems of one stream, one count per name of :data:`INPUT_COUNTER_NAMES`.
+
+    A read-only mapping for everyone but :meth:`add`: the checks, the pipeline and the
+    session's decoder add to one instance, and diagnostics read it.
+    """
+
+    def __init__(self) -> None:
+        """Start with every count zero."""
+        self._counts = new_counts()
+
+    def add(self, name: str, n: int = 1) -> None:
+        """Count ``n`` more problems of kind ``name``.
+
+        Raises:
+            KeyError: If ``name`` is not in :data:`INPUT_COUNTER_NAMES`.
+
+        """
+        if name not in self._counts:
+            raise KeyError(f'unknown input counter {name!r}')
+        self._counts[name] += n
+
+    def __getitem__(self, name: str) -> int:
+        """Return the count of ``name``."""
+        return self._counts[name]
+
+    def __iter__(self) -> Iterator[str]:
+        """Iterate over the names, in :data:`INPUT_COUNTER_NAMES` order."""
+        return iter(self._counts)
+
+    def __len__(self) -> int:
+        """Return the number of names."""
+        return len(self._counts)
+
+    def __repr__(self) -> str:
+        """Show the non-zero counts."""
+        return f'InputCounts({ {k: v for k, v in self._counts.items() if v} })'
+
+
 @dataclass(frozen=True)
 class PairCheck:
     """What :meth:`PairChecks.check` found in one pair.
@@ -76,82 +119,90 @@ class PairChecks:
     """Per-stream checks of decoded stereo pairs; see the module docstring.
 
     Args:
-        max_clipped_fraction: A frame with more than this fraction of its pixels black
-            (grey <= 2) or saturated (grey >= 253) is refused; 1.0 never refuses.
-        max_stamp_jump_s: A stamp more than this many seconds after the last pair's drops the
-            warm start.
+        counts: Where the problems are counted (default: a new :class:`InputCounts`).
 
     """
 
-    def __init__(self, max_clipped_fraction: float, max_stamp_jump_s: float) -> None:
+    def __init__(self, counts: InputCounts | None = None) -> None:
         """Start with no previous pair."""
-        self.max_clipped_fraction = max_clipped_fraction
-        self.max_stamp_jump_s = max_stamp_jump_s
-        self.counts = new_counts()
+        self.counts = counts if counts is not None else InputCounts()
         self._last_stamp_ns: int | None = None
         self._last_shapes: tuple[tuple[int, ...], tuple[int, ...]] | None = None
         self._last_images: tuple[np.ndarray, np.ndarray] | None = None
 
-    def check(self, left: np.ndarray, right: np.ndarray, stamp_ns: int) -> PairCheck:
+    def check(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
+              limits: PipelineConfig) -> PairCheck:
         """Check one pair and remember it for the next.
 
         Args:
             left: (H, W) uint8 left grey image.
             right: (H', W') uint8 right grey image.
             stamp_ns: The pair's stamp, nanoseconds.
+            limits: The ``pipeline.*`` configuration in force: ``max_clipped_fraction`` (a
+                frame with more of its pixels black (<= 2) or saturated (>= 253) is refused;
+                1.0 never refuses) and ``max_stamp_jump_s`` (a stamp more than this after the
+                last pair's drops the warm start).
 
         Returns:
             The :class:`PairCheck`.
 
         """
         warnings: list[str] = []
-        reset = False
-        counts = self.counts
-        last = self._last_stamp_ns
-        if last is not None and stamp_ns < last:
-            counts['stamp_backwards'] += 1
-            reset = True
-            warnings.append(f'stamp went backwards by {(last - stamp_ns) * 1e-9:.3f} s: '
-                            'warm start dropped')
-        elif last is not None and stamp_ns - last > self.max_stamp_jump_s * 1e9:
-            counts['stamp_jumps'] += 1
-            reset = True
-            warnings.append(f'stamp jumped forward by {(stamp_ns - last) * 1e-9:.1f} s '
-                            f'(> pipeline.max_stamp_jump_s {self.max_stamp_jump_s:g} s): '
-                            'warm start dropped')
-        self._last_stamp_ns = stamp_ns
+        reset = self._check_stamp(stamp_ns, limits.max_stamp_jump_s, warnings)
         shapes = (left.shape, right.shape)
         if self._last_shapes is not None and shapes != self._last_shapes:
-            counts['size_changes'] += 1
+            self.counts.add('size_changes')
             reset = True
             warnings.append(f'image size changed from {_sizes(self._last_shapes)} to '
                             f'{_sizes(shapes)}: warm start dropped')
         self._last_shapes = shapes
         refused = ''
         if left.shape != right.shape:
-            counts['size_mismatch'] += 1
+            self.counts.add('size_mismatch')
             refused = (f'left and right images differ in size: left {_size(left.shape)}, '
                        f'right {_size(right.shape)}')
         if not refused:
             for gray, side in ((left, 'left'), (right, 'right')):
-                refused = clipped_reason(gray, side, self.max_clipped_fraction)
+                refused = clipped_reason(gray, side, limits.max_clipped_fraction)
                 if refused:
-                    counts['clipped'] += 1
+                    self.counts.add('clipped')
                     break
         # A frozen camera: compared with the previous pair that passed the checks above.
         previous, self._last_images = self._last_images, None
         if not refused:
             # Copies, compared exactly (faster than hashing: 0.1 ms for two 1280x720 images).
             self._last_images = (left.copy(), right.copy())
-            same = previous is not None and [
-                previous[i].shape == image.shape and np.array_equal(previous[i], image)
-                for i, image in enumerate((left, right))]
-            if same and same[0] != same[1]:
-                counts['frozen_camera'] += 1
-                frozen, moving = ('left', 'right') if same[0] else ('right', 'left')
-                refused = (f'{frozen} camera frozen: its image is identical to its previous '
-                           f'one while the {moving} image changed')
+            refused = self._frozen_reason(previous, left, right)
         return PairCheck(refused, reset, tuple(warnings))
+
+    def _check_stamp(self, stamp_ns: int, max_jump_s: float, warnings: list[str]) -> bool:
+        """Return whether the stamp (backwards, or a jump forward) drops the warm start."""
+        last, self._last_stamp_ns = self._last_stamp_ns, stamp_ns
+        if last is not None and stamp_ns < last:
+            self.counts.add('stamp_backwards')
+            warnings.append(f'stamp went backwards by {(last - stamp_ns) * 1e-9:.3f} s: '
+                            'warm start dropped')
+            return True
+        if last is not None and stamp_ns - last > max_jump_s * 1e9:
+            self.counts.add('stamp_jumps')
+            warnings.append(f'stamp jumped forward by {(stamp_ns - last) * 1e-9:.1f} s '
+                            f'(> pipeline.max_stamp_jump_s {max_jump_s:g} s): '
+                            'warm start dropped')
+            return True
+        return False
+
+    def _frozen_reason(self, previous: tuple[np.ndarray, np.ndarray] | None,
+                       left: np.ndarray, right: np.ndarray) -> str:
+        """Return why one camera is frozen while the other changed ('' if it is not)."""
+        same = previous is not None and [
+            previous[i].shape == image.shape and np.array_equal(previous[i], image)
+            for i, image in enumerate((left, right))]
+        if not same or same[0] == same[1]:
+            return ''
+        self.counts.add('frozen_camera')
+        frozen, moving = ('left', 'right') if same[0] else ('right', 'left')
+        return (f'{frozen} camera frozen: its image is identical to its previous '
+                f'one while the {moving} image changed')
 
 
 def clipped_reason(gray: np.ndarray, side: str, max_fraction: float) -> str:
@@ -249,14 +300,17 @@ class StampChecks:
     not a skew, and is not counted here.)
 
     Args:
-        slop_ns: The synchroniser's slop, nanoseconds.
+        slop_ns: The synchroniser's slop, nanoseconds (a synchroniser with another slop comes
+            with new stamp checks: see :meth:`StreamSession.update_config
+            <domplane_ros.stream.session.StreamSession.update_config>`).
+        counts: Where the problems are counted (default: a new :class:`InputCounts`).
 
     """
 
-    def __init__(self, slop_ns: int) -> None:
+    def __init__(self, slop_ns: int, counts: InputCounts | None = None) -> None:
         """Start with no messages seen."""
         self.slop_ns = int(slop_ns)
-        self.counts = new_counts()
+        self.counts = counts if counts is not None else InputCounts()
         self.last_skew_ns = 0
         # Per side: [stamp, closest distance to the other side] of recent messages.
         self._recent: dict[str, deque[list[int]]] = {
@@ -276,7 +330,7 @@ class StampChecks:
         """
         warnings = []
         if stamp_ns == 0:
-            self.counts['stamp_zero'] += 1
+            self.counts.add('stamp_zero')
             warnings.append(f'{side} image header stamp is zero: the camera driver does not '
                             'stamp its images, so they cannot be paired by time')
         other = self._recent['right' if side == 'left' else 'left']
@@ -291,7 +345,7 @@ class StampChecks:
             old_stamp, skew = own.popleft()
             moved_on = bool(other) and other[-1][0] > old_stamp
             if skew > self.slop_ns and moved_on:
-                self.counts['sync_skew'] += 1
+                self.counts.add('sync_skew')
                 self.last_skew_ns = skew
                 warnings.append(
                     f'{side} image at {old_stamp * 1e-9:.3f} s had no partner: the closest '

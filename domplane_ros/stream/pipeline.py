@@ -1,8 +1,10 @@
 """One object per stereo stream: features, warm start or prior, estimate, mask.
 
 The live node and the offline replay are thin adapters around :class:`PlanePipeline`, so the
-same frames give the same results in both. All state that lives across frames (the last good
-homography, its energy, the lock state, the counters) lives here and nowhere else.
+same frames give the same results in both. The estimation state that lives across frames (the
+last good homography, its energy, the lock state, the pipeline's statistics) lives here; the
+stream's bookkeeping (pair counters, input-problem counts, the status) lives in
+:class:`~domplane_ros.stream.session.StreamSession`, whose counts the pipeline adds to.
 """
 
 from __future__ import annotations
@@ -22,7 +24,8 @@ from domplane_ros.core.prior import prior_candidates, PriorSearch
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import camera_motion, predict_plane_homography
 from domplane_ros.stream.frame import debug_overlay, FrameResult
-from domplane_ros.stream.health import homography_problem, inlier_spread, PairChecks, texture_note
+from domplane_ros.stream.health import (homography_problem, inlier_spread, InputCounts,
+                                        PairChecks, texture_note)
 import numpy as np
 
 __all__ = ['FrameResult', 'LOCKED', 'PipelineStats', 'PlanePipeline', 'SEARCHING', 'TRACKING',
@@ -85,17 +88,20 @@ class PlanePipeline:
 
     Args:
         config: The whole configuration (the node's parameters).
+        counts: Where input problems are counted (default: a new
+            :class:`~domplane_ros.stream.health.InputCounts`; a session passes its own).
 
     """
 
-    def __init__(self, config: PlaneNodeConfig | None = None) -> None:
+    def __init__(self, config: PlaneNodeConfig | None = None,
+                 counts: InputCounts | None = None) -> None:
         """Start with no warm start: the first frames search the prior."""
         self.config = config if config is not None else PlaneNodeConfig()
         self.stats = PipelineStats()
         self._last_h: np.ndarray | None = None
         self._last_energy_per_point: float | None = None
-        self.checks = PairChecks(self.config.pipeline.max_clipped_fraction,
-                                 self.config.pipeline.max_stamp_jump_s)
+        self.counts = counts if counts is not None else InputCounts()
+        self.checks = PairChecks(self.counts)
         self._bounds_cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
         self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
         self._state = SEARCHING
@@ -124,8 +130,6 @@ class PlanePipeline:
             self._bounds_cache.clear()
             self._candidates_cache.clear()
         self.config = config
-        self.checks.max_clipped_fraction = config.pipeline.max_clipped_fraction
-        self.checks.max_stamp_jump_s = config.pipeline.max_stamp_jump_s
 
     def reset(self) -> None:
         """Drop the warm start: the next frames search the prior."""
@@ -166,7 +170,7 @@ class PlanePipeline:
         """
         t0 = time.perf_counter()
         _check_frame(left, right, joint_speed)
-        check = self.checks.check(left, right, stamp_ns)
+        check = self.checks.check(left, right, stamp_ns, self.config.pipeline)
         if reset or check.reset:
             self.reset()
         self.stats.frames += 1
@@ -184,7 +188,7 @@ class PlanePipeline:
         estimate, h, mask = self._publish(step, left, right, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
-            self.checks.counts['too_few_features'] += 1
+            self.counts.add('too_few_features')
             reason += f' (left {texture_note(left)}; right {texture_note(right)})'
         if not step.keep_previous:
             self._previous = _Previous(left.copy(), right.copy(), *track_pts)
@@ -468,9 +472,9 @@ class PlanePipeline:
         for needle, key in (('outside the prior', 'outside_prior'),
                             ('degenerate geometry', 'degenerate_geometry')):
             if needle in reason:
-                self.checks.counts[key] += 1
+                self.counts.add(key)
                 return
-        self.checks.counts['invalid_homography'] += 1
+        self.counts.add('invalid_homography')
 
     def _input_problem(self, estimate: PlaneEstimate, left_pts: np.ndarray,
                        size: tuple[int, int], count: bool = True) -> str:
@@ -478,7 +482,7 @@ class PlanePipeline:
         problem = homography_problem(estimate.homography)
         if problem:
             if count:
-                self.checks.counts['invalid_homography'] += 1
+                self.counts.add('invalid_homography')
             return problem
         min_spread = self.config.pipeline.min_inlier_spread
         if min_spread > 0:
@@ -490,7 +494,7 @@ class PlanePipeline:
             spread = inlier_spread(inliers, float((x1 - x0) * (y1 - y0)))
             if spread < min_spread:
                 if count:
-                    self.checks.counts['degenerate_geometry'] += 1
+                    self.counts.add('degenerate_geometry')
                 return (f'degenerate geometry: the inliers span {100 * spread:.2f} % of the '
                         f'region of interest (< pipeline.min_inlier_spread {min_spread:g}); '
                         'collinear or packed in one patch, they do not constrain the plane')
@@ -517,7 +521,7 @@ class PlanePipeline:
             mapped = apply_homography(homography, corners)
             if np.any(mapped < low) or np.any(mapped > high):
                 if count:
-                    self.checks.counts['outside_prior'] += 1
+                    self.counts.add('outside_prior')
                 return 'homography outside the prior: an image corner maps beyond its range'
         return ''
 

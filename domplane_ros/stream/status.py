@@ -32,15 +32,12 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         dropped_busy: Pairs replaced before the worker took them.
         dropped_sync: Frames dropped by the synchroniser.
         decode_errors: Images rejected by the decoder.
-        lock_state: The pipeline's lock state: ``'locked'``, ``'tracking'`` or
-            ``'searching'``.
+        lock_state: The pipeline's lock state (``'locked'``, ``'tracking'``, ``'searching'``).
         reinitialisations: Prior searches started.
         consecutive_failures: Processed pairs in a row without a plane.
-        last_result: The last :class:`~domplane_ros.stream.pipeline.FrameResult`, or None (also
-            when the last pair could not be decoded).
+        last_result: The last ``FrameResult``, or None (also if the last pair did not decode).
         last_error: The last error message ('' if none).
-        input_counts: Counts of input problems (see :mod:`domplane_ros.stream.health`), summed and
-            shown one key per kind.
+        input_counts: Input problem counts (:mod:`~domplane_ros.stream.health`), summed.
         input_warning: An input problem seen since the last status that did not fail a pair
             (a zero stamp, a stamp jump, stamp skew beyond the slop); it makes an OK status a
             WARN and is appended to the message.
@@ -56,49 +53,73 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         row without a plane); a one-line message; key/value pairs as strings.
 
     """
-    lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
-    result = last_result
-    # The last pair's failure: the pipeline's reason, or (no result: it was not decoded) the
-    # last error.
-    reason = result.reason if result is not None and not result.ok else last_error
-    silent = [(topic, age) for topic, _, _, age in cameras if age > silence_s]
-    if silent:
-        level, message = WARN, 'no images on ' + ', '.join(
-            f'{topic} for {age:.1f} s' for topic, age in silent)
-    elif rate == 0.0:
-        level, message = WARN, 'no stereo pairs received'
-    elif consecutive_failures >= FAILURES_FOR_ERROR:
-        level, message = ERROR, f'no plane for {consecutive_failures} pairs: {reason}'
-    elif consecutive_failures > 0 or (result is not None and not result.ok):
-        level, message = WARN, f'no plane: {reason}'
-    else:
-        level, message = OK, 'plane ' + lock_state
+    level, message = _level_and_message(rate, consecutive_failures, last_result,
+                                        _failure_reason(last_result, last_error), lock_state,
+                                        cameras, silence_s)
     if input_warning:
         level = max(level, WARN)
         message += f'; {input_warning}'
-    ok = result is not None and result.ok
     values = [
         ('input rate [pairs/s]', f'{rate:.2f}'),
-        ('processing latency median [ms]', f'{np.median(lat):.2f}'),
-        ('processing latency p95 [ms]', f'{np.percentile(lat, 95):.2f}'),
+        *_latency_values(latencies_ms),
         ('pairs', pairs),
         ('processed pairs', processed),
         ('dropped pairs (busy)', dropped_busy),
         ('dropped frames (sync)', dropped_sync),
         ('decode errors', decode_errors),
         ('lock state', lock_state),
+        *_result_values(last_result, joint_speed),
+        ('re-initialisations', reinitialisations),
+        ('last error', last_error or 'none'),
+    ]
+    values += input_diagnostic_values(*input_counts) + _camera_values(cameras)
+    return level, message, [(key, str(value)) for key, value in values]
+
+
+def _camera_values(cameras: Sequence[tuple[str, int, float, float]]) -> list[tuple[str, Any]]:
+    values: list[tuple[str, Any]] = []
+    for topic, received, camera_rate, age in cameras:
+        values += [(f'{topic} images received', received),
+                   (f'{topic} rate [images/s]', f'{camera_rate:.2f}'),
+                   (f'{topic} last image age [s]', f'{age:.2f}')]
+    return values
+
+
+def _failure_reason(result: Any, last_error: str) -> str:
+    """Return the last pair's failure: the pipeline's reason or (not decoded) the last error."""
+    return result.reason if result is not None and not result.ok else last_error
+
+
+def _level_and_message(rate: float, consecutive_failures: int, result: Any, reason: str,
+                       lock_state: str, cameras: Sequence[tuple[str, int, float, float]],
+                       silence_s: float) -> tuple[int, str]:
+    silent = [(topic, age) for topic, _, _, age in cameras if age > silence_s]
+    if silent:
+        return WARN, 'no images on ' + ', '.join(
+            f'{topic} for {age:.1f} s' for topic, age in silent)
+    if rate == 0.0:
+        return WARN, 'no stereo pairs received'
+    if consecutive_failures >= FAILURES_FOR_ERROR:
+        return ERROR, f'no plane for {consecutive_failures} pairs: {reason}'
+    if consecutive_failures > 0 or (result is not None and not result.ok):
+        return WARN, f'no plane: {reason}'
+    return OK, 'plane ' + lock_state
+
+
+def _latency_values(latencies_ms: Sequence[float]) -> list[tuple[str, str]]:
+    lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
+    return [('processing latency median [ms]', f'{np.median(lat):.2f}'),
+            ('processing latency p95 [ms]', f'{np.percentile(lat, 95):.2f}')]
+
+
+def _result_values(result: Any, joint_speed: float | None) -> list[tuple[str, Any]]:
+    """Return the last result's keys, from 'warm start' to 'converged'."""
+    ok = result is not None and result.ok
+    return [
         ('warm start', (result.warm_start or 'none') if result is not None else 'none'),
         ('prior candidates (last frame)', result.candidates if result is not None else 0),
         ('head joint speed [rad/s]', 'n/a' if joint_speed is None else f'{joint_speed:.3f}'),
         ('inliers', result.n_inliers if result is not None else 0),
         ('final energy', f'{result.estimate.final_energy:.4g}' if ok else 'n/a'),
         ('converged', bool(ok and result.estimate.converged)),
-        ('re-initialisations', reinitialisations),
-        ('last error', last_error or 'none'),
     ]
-    values += input_diagnostic_values(*input_counts)
-    for topic, received, camera_rate, age in cameras:
-        values += [(f'{topic} images received', received),
-                   (f'{topic} rate [images/s]', f'{camera_rate:.2f}'),
-                   (f'{topic} last image age [s]', f'{age:.2f}')]
-    return level, message, [(key, str(value)) for key, value in values]

@@ -90,12 +90,12 @@ def bench_latency(width: int, height: int, n_frames: int, seed: int) -> None:
             ours.append(elapsed)
             ours_err.append(_error(result.homography, frames[i]))
     # The bad-input checks alone (part of the pipeline's time): size, frozen camera, clipping.
-    checks = PairChecks(config.pipeline.max_clipped_fraction, config.pipeline.max_stamp_jump_s)
+    checks = PairChecks()
     check_times = []
     for i, (lm, rm) in enumerate(msgs):
         left, right = message_to_gray(lm), message_to_gray(rm)
         t = time.perf_counter()
-        checks.check(left, right, i * 33_000_000)
+        checks.check(left, right, i * 33_000_000, config.pipeline)
         check_times.append(time.perf_counter() - t)
     orb = cv2.ORB_create(nfeatures=1000)
     matcher = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True)
@@ -168,8 +168,8 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         executor.spin_once(timeout_sec=0.01)
-    processed = node._counters['processed']
-    busy = node._counters['dropped_busy']
+    processed = node.session.counters.processed
+    busy = node.slot.dropped
     executor.shutdown()
     node.destroy_node()
     driver.destroy_node()

@@ -9,8 +9,8 @@ from pathlib import Path
 from bag_helpers import (check_output, expected_results, image_msg, LEFT, left_stamp, read_bag,
                          RIGHT, RIGHT_OFFSET_NS, T, tree, TS, write_bag)
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.replay.cli import (BagInput, main, pair_messages, replay_frames, ReplaySession,
-                                     run_replay)
+from domplane_ros.replay.cli import main, run_replay
+from domplane_ros.replay.reader import BagInput, pair_messages, replay_frames, ReplaySession
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.sync import ApproximateTimeSync
 import numpy as np

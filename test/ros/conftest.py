@@ -1,4 +1,4 @@
-"""Shared pytest fixtures.
+"""Fixtures of the ROS tests (the only conftest that imports rclpy); every test here is ``ros``.
 
 ``ros_context`` gives each test a private, initialised ``rclpy`` context, so node tests run
 in-process without touching the global context. DDS discovery is kept on loopback and every
@@ -9,6 +9,7 @@ other's nodes.
 from __future__ import annotations
 
 import os
+from pathlib import Path
 import random
 from typing import Iterator
 
@@ -20,6 +21,14 @@ from rclpy.context import Context
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 _SESSION_DOMAIN_ID = random.SystemRandom().randint(1, 200)
+_HERE = Path(__file__).parent
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Mark every test under test/ros ``ros``, so that ``-m 'not ros'`` runs the rest."""
+    for item in items:
+        if _HERE in Path(str(item.fspath)).parents:
+            item.add_marker(pytest.mark.ros)
 
 
 @pytest.fixture(scope='session')

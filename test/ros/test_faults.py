@@ -121,13 +121,13 @@ def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
                                             Parameter('diagnostics.silence_s', value=0.5),
                                             Parameter('pipeline.max_stamp_jump_s', value=1.0)))
     processed_pairs = []
-    real_process = rig.node._process
+    real_process = rig.node.process_pair
 
     def recording_process(pair):
         processed_pairs.append((time.monotonic(), pair.left_stamp_ns, pair.right_stamp_ns))
         real_process(pair)
 
-    rig.node._process = recording_process
+    rig.node.process_pair = recording_process
     try:
         rig.wait_for_discovery()
         # Both cameras at 20 Hz until the node is locked on the plane.
@@ -202,20 +202,21 @@ def test_100hz_load_keeps_queues_bounded_newest_wins_and_counts_drops(
             for side, gray in (('left', small_scene.left), ('right', small_scene.right)):
                 rig.pubs[side].publish(_mono8(gray, last_stamp, f'{side}_cam'))
             sent += 1
-            stats = node._sync.stats()
+            stats = node.session.sync.stats()
             max_queued = max(max_queued, stats.queued_left, stats.queued_right)
             next_time = start + sent * 0.01
             while time.monotonic() < next_time:
                 rig.executor.spin_once(timeout_sec=0.002)
-        counters = node._counters
+        counters = node.session.counters
+        slot = node.slot
 
         def settled():
-            return (node._pending is None
-                    and counters['processed'] + counters['dropped_busy'] == counters['pairs'])
+            return (not node.slot.pending
+                    and counters.processed + slot.dropped == counters.pairs)
 
         rig.wait_for(settled, 10.0, 'the worker to finish')
         rig.spin_for(1.2)      # one more diagnostics period with the final counters
-        stats = node._sync.stats()
+        stats = node.session.sync.stats()
         assert max_queued <= queue_size
         assert stats.received_left <= sent and stats.received_right <= sent
         lost_in_dds = 2 * sent - stats.received
@@ -225,22 +226,22 @@ def test_100hz_load_keeps_queues_bounded_newest_wins_and_counts_drops(
         # (unless DDS lost one of its two images).
         if stats.received == 2 * sent:
             assert processed_stamps[-1] == last_stamp
-        assert counters['pairs'] == counters['processed'] + counters['dropped_busy']
-        assert counters['dropped_busy'] > counters['processed'] > 0
-        assert counters['processed'] <= 5.0 / 0.04 + 5
+        assert counters.pairs == counters.processed + slot.dropped
+        assert slot.dropped > counters.processed > 0
+        assert counters.processed <= 5.0 / 0.04 + 5
         values = {kv.key: kv.value for kv in rig.diagnostics[-1][1].values}
-        assert int(values['dropped pairs (busy)']) == counters['dropped_busy']
-        assert int(values['processed pairs']) == counters['processed']
+        assert int(values['dropped pairs (busy)']) == slot.dropped
+        assert int(values['processed pairs']) == counters.processed
         assert int(values['dropped frames (sync)']) == stats.dropped
         assert int(values['/left/image_raw images received']) == stats.received_left
         # Pairs sent but not processed are all counted: busy drops in the node, and frames
         # the synchroniser dropped, still queues or DDS lost (two frames per pair).
-        assert (2 * (sent - counters['processed'] - counters['dropped_busy'])
+        assert (2 * (sent - counters.processed - slot.dropped)
                 == stats.dropped + stats.queued_left + stats.queued_right + lost_in_dds)
         # Stamp to mask arrival stays bounded (an unbounded queue would reach seconds).
         latency_s = np.array([t - (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
                               for t, m in rig.masks])
-        assert latency_s.size >= counters['processed'] - 5
+        assert latency_s.size >= counters.processed - 5
         assert np.median(latency_s) < 0.3 and latency_s.max() < 1.0, (
             np.median(latency_s), latency_s.max())
 

@@ -149,10 +149,10 @@ def test_bad_encoding_is_rejected_and_node_recovers(ros_context, scene):
     h = Harness(ros_context, _prior_overrides(scene))
     try:
         h.wait_for_subscribers()
-        h.send_until(scene.left, scene.right, lambda: h.node._counters['decode_errors'] >= 2,
+        h.send_until(scene.left, scene.right, lambda: h.node.session.counters.decode_errors >= 2,
                      20_000_000_000, encoding='yuv444_bogus')
         assert not h.homographies
-        assert 'yuv444_bogus' in h.node._last_error
+        assert 'yuv444_bogus' in h.node.session.last_error
         h.send_until(scene.left, scene.right, lambda: bool(h.homographies), 30_000_000_000)
         assert np.all(np.isfinite(h.homographies[-1].data))
     finally:
@@ -179,7 +179,7 @@ def test_runtime_parameter_changes_are_validated(ros_context, scene):
         assert all(r.successful for r in res)
         assert node.config.estimator.potential == 'huber'
         assert node.pipeline.config.estimator.potential == 'huber'
-        assert node._sync.slop_s == pytest.approx(0.02)
+        assert node.session.sync.slop_s == pytest.approx(0.02)
     finally:
         h.close()
 
@@ -231,17 +231,18 @@ def test_slow_processing_keeps_newest_pair_and_counts_drops(ros_context, scene):
                 h.executor.spin_once(timeout_sec=0.005)
         last_sent = stamp - 33_000_000
         deadline = time.monotonic() + 10.0
-        counters = h.node._counters
+        counters = h.node.session.counters
+        slot = h.node.slot
 
         def settled():
             return (processed_stamps and processed_stamps[-1] == last_sent
-                    and counters['processed'] + counters['dropped_busy'] == counters['pairs'])
+                    and counters.processed + slot.dropped == counters.pairs)
 
         while time.monotonic() < deadline and not settled():
             h.executor.spin_once(timeout_sec=0.05)
         assert processed_stamps[-1] == last_sent  # the newest pair was processed
-        assert counters['dropped_busy'] > 0
-        assert counters['processed'] + counters['dropped_busy'] == counters['pairs']
+        assert slot.dropped > 0
+        assert counters.processed + slot.dropped == counters.pairs
         assert len(processed_stamps) < 12
     finally:
         h.close()

@@ -36,7 +36,7 @@ def test_node_without_joint_states_reports_no_joint_speed(ros_context, scene):  
         assert values['head joint speed [rad/s]'] == 'n/a'
         assert values['warm start'] in ('prediction', 'last', 'search')
         assert h.node.joint_speed() is None
-        assert not h.node._last_result.fast_motion
+        assert not h.node.session.last_result.fast_motion
     finally:
         h.close()
 
@@ -69,18 +69,18 @@ def test_node_with_joint_states_uses_the_fast_joint_hint(ros_context, scene):  #
         send_joints([0.2, -2.5, float('nan')])  # tilt at 2.5 rad/s; NaN is ignored
         h.send_until(scene.left, scene.right,
                      lambda: h.node.joint_speed() is not None and h.homographies
-                     and h.node._last_result is not None and h.node._last_result.ok
-                     and h.node._last_result.fast_motion, 10_000_000_000)
+                     and h.node.session.last_result is not None and h.node.session.last_result.ok
+                     and h.node.session.last_result.fast_motion, 10_000_000_000)
         assert h.node.joint_speed() == 2.5
         # The hint does not cost the plane: it is still right.
         assert _plane_error(h.homographies[-1], scene) < 1.0
         send_joints([0.1, 0.2, 0.0])  # slow again
         h.send_until(scene.left, scene.right,
-                     lambda: h.node.joint_speed() == 0.2 and h.node._last_result is not None
-                     and not h.node._last_result.fast_motion and h.diagnostics
+                     lambda: h.node.joint_speed() == 0.2 and h.node.session.last_result is not None
+                     and not h.node.session.last_result.fast_motion and h.diagnostics
                      and _values(h.diagnostics)['head joint speed [rad/s]'] == '0.200',
                      20_000_000_000)
-        assert h.node._last_result.ok
+        assert h.node.session.last_result.ok
         assert _values(h.diagnostics)['lock state'] == 'locked'
     finally:
         h.close()

@@ -74,7 +74,7 @@ def test_node_finds_low_texture_floor_with_lines(ros_context, tiles, kind):
         err = np.linalg.norm(apply_homography(est, truth_px)
                              - apply_homography(tiles.homography, truth_px), axis=1)
         assert err.mean() < 1.0, err.mean()
-        last = node._last_result
+        last = node.session.last_result
         assert last.left_lines.shape[0] > 50
         assert last.estimate.line_inliers.sum() > 40
         assert _cyan(debug[-1]) > 200

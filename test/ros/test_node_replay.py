@@ -6,7 +6,8 @@ import time
 
 from bag_helpers import LEFT, N_FRAMES, read_bag, RIGHT, write_bag
 from diagnostic_msgs.msg import DiagnosticArray
-from domplane_ros.replay.cli import BagInput, pair_messages, run_replay
+from domplane_ros.replay.cli import run_replay
+from domplane_ros.replay.reader import BagInput, pair_messages
 from domplane_ros.ros.node import PlaneNode
 from domplane_ros.stream.sync import ApproximateTimeSync
 import numpy as np
@@ -87,15 +88,15 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
         expected_h = [f.result.homography for f in replayed if f.result.ok]
         spin_until(lambda: len(homographies) >= len(expected_h)
                    and diagnostics and diagnostics[-1].status[0].values
-                   and node._counters['processed'] == N_FRAMES, 5.0)
+                   and node.session.counters.processed == N_FRAMES, 5.0)
         spin_until(lambda: False, 0.3)   # anything late would show up as an extra message
     finally:
         executor.shutdown()
         node.destroy_node()
         driver.destroy_node()
 
-    assert node._counters['processed'] == N_FRAMES
-    assert node._counters['dropped_busy'] == 0
+    assert node.session.counters.processed == N_FRAMES
+    assert node.slot.dropped == 0
     assert mask_stamps() == [f.pair.left_stamp_ns for f in replayed]
     for msg, frame in zip(masks, replayed):
         assert np.array_equal(np.frombuffer(bytes(msg.data), np.uint8).reshape(
