@@ -1,0 +1,180 @@
+"""Tests of the plane verification: true planes pass, look-alikes and swapped planes do not."""
+
+from __future__ import annotations
+
+import cv2
+from domplane_ros.config import PriorConfig
+from domplane_ros.core import prior, verification
+from domplane_ros.sim import scene
+import numpy as np
+import pytest
+
+CONFIG = verification.VerificationConfig()
+SETUP = scene.CameraSetup(focal_px=300.0, baseline_over_height=0.2, tilt_deg=30.0,
+                          vergence_deg=1.0, width=320, height=240)
+# Floor periods (camera height 1) of the rendered planks and tiles, along the level x axis
+# when the head pose's yaw is 0: 32 texels of 0.005 and 64 texels of 0.005.
+PERIOD = {'planks': 0.16, 'tiles': 0.32}
+
+
+def _translate(dx: float, dy: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
+
+
+@pytest.fixture(scope='module', params=['planks', 'tiles'])
+def frame(request: pytest.FixtureRequest) -> scene.StereoFrame:
+    # Yaw 0 puts the texture axes on the level axes, so a baseline change of one period is
+    # exactly "one plank or tile off". The right camera has a gain and offset.
+    return scene.render_stereo(SETUP, [scene.Box(0.4, 3.0, 0.5, 0.5, 0.6, 20.0)],
+                               floor=request.param, seed=3, gain=1.15, offset=-10.0,
+                               head_pose=scene.HeadPose(1.3, 2.1, 0.0))
+
+
+def _inverse(hom: np.ndarray) -> np.ndarray:
+    inv = np.linalg.inv(hom)
+    return inv / inv[2, 2]
+
+
+def test_true_plane_is_accepted_with_high_confidence(frame: scene.StereoFrame) -> None:
+    result = verification.verify_plane(frame.left, frame.right, frame.homography, CONFIG)
+    assert result.accepted, result
+    assert result.reason == ''
+    assert result.confidence >= 0.5
+    assert 0.0 <= result.score <= result.support_fraction <= 1.0
+    assert result.time_ms > 0.0
+
+
+@pytest.mark.parametrize('shift', [(10.0, 0.0), (-20.0, 0.0), (0.0, 10.0), (40.0, 0.0)])
+def test_shifted_plane_is_rejected(frame: scene.StereoFrame, shift: tuple[float, float]
+                                   ) -> None:
+    # 10-20 px is one plank or tile in the image's near field at this size.
+    true = verification.verify_plane(frame.left, frame.right, frame.homography, CONFIG)
+    wrong = verification.verify_plane(frame.left, frame.right,
+                                      _translate(*shift) @ frame.homography, CONFIG)
+    assert not wrong.accepted
+    assert wrong.reason == verification.REASON_LOW_SUPPORT
+    assert wrong.confidence < 0.5
+    # Fails if the comparison is inverted or the check always passes.
+    assert true.score > 3.0 * wrong.score
+
+
+def test_one_period_look_alike_scores_below_the_truth(frame: scene.StereoFrame) -> None:
+    # The plane one plank/tile off on the floor matches the periodic floor almost everywhere;
+    # the non-periodic texture (plank ends, tile shades, the box) still ranks it lower.
+    period = PERIOD[frame.floor]
+    true = verification.verify_plane(frame.left, frame.right, frame.homography, CONFIG)
+    for baseline in (SETUP.baseline_over_height - period, SETUP.baseline_over_height + period):
+        look_alike = prior.plane_homography(SETUP.focal_px, baseline, SETUP.tilt_deg,
+                                            SETUP.vergence_deg, SETUP.width, SETUP.height)
+        wrong = verification.verify_plane(frame.left, frame.right, look_alike, CONFIG)
+        assert wrong.score < 0.8 * true.score, (baseline, wrong.score, true.score)
+
+
+def test_cut_and_prior_planes_are_rejected(frame: scene.StereoFrame) -> None:
+    other = scene.CameraSetup(650.0, 0.1, 15.0, -1.0, 320, 240).homography()
+    candidates = prior.prior_candidates(PriorConfig(), 320, 240)
+    corners = np.array([[0.0, 120.0], [319.0, 120.0], [319.0, 239.0], [0.0, 239.0]])
+    truth = cv2.perspectiveTransform(corners[None], frame.homography)[0]
+    far = [c for c in candidates
+           if np.abs(cv2.perspectiveTransform(corners[None], c)[0] - truth).max() > 10.0]
+    for hom in [other] + far[::max(1, len(far) // 6)]:
+        result = verification.verify_plane(frame.left, frame.right, hom, CONFIG)
+        assert not result.accepted, result
+
+
+def test_swapped_cameras_are_detected(frame: scene.StereoFrame) -> None:
+    width, height = SETUP.width, SETUP.height
+    correct = verification.swap_evidence(frame.homography, width, height)
+    assert not correct.swapped and correct.disparity_slope > 0.0
+    # For the swapped pair the correct plane is H^-1: it verifies (it is right for that pair)
+    # and the swap evidence names the problem.
+    swapped_h = _inverse(frame.homography)
+    assert verification.verify_plane(frame.right, frame.left, swapped_h, CONFIG).accepted
+    evidence = verification.swap_evidence(swapped_h, width, height)
+    assert evidence.swapped and evidence.disparity_slope < 0.0
+    # The unswapped plane on the swapped pair does not verify.
+    assert not verification.verify_plane(frame.right, frame.left, frame.homography,
+                                         CONFIG).accepted
+
+
+def test_random_planes_are_rejected() -> None:
+    frame = scene.render_stereo(SETUP, floor='random', seed=5, gain=0.9, offset=12.0)
+    assert verification.verify_plane(frame.left, frame.right, frame.homography).accepted
+    rng = np.random.default_rng(0)
+    corners = np.array([[0, 0], [319, 0], [319, 239], [0, 239]], np.float32)
+    for _ in range(10):
+        moved = corners + rng.uniform(-60, 60, (4, 2)).astype(np.float32)
+        hom = cv2.getPerspectiveTransform(corners, moved)
+        assert not verification.verify_plane(frame.left, frame.right, hom).accepted
+
+
+def test_untextured_pair_fails_with_its_reason() -> None:
+    flat = np.full((120, 160), 90, np.uint8)
+    result = verification.verify_plane(flat, flat, np.eye(3))
+    assert not result.accepted
+    assert result.reason == verification.REASON_NO_TEXTURE
+    assert result.confidence == 0.0
+
+
+def test_plane_mapping_outside_the_right_image_fails() -> None:
+    rng = np.random.default_rng(1)
+    image = cv2.GaussianBlur(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0, 0), 1.0)
+    result = verification.verify_plane(image, image, _translate(1000.0, 0.0))
+    assert result.reason == verification.REASON_NO_OVERLAP
+    assert verification.verify_plane(image, image, np.eye(3)).accepted
+
+
+def test_roi_restricts_the_region() -> None:
+    rng = np.random.default_rng(2)
+    image = cv2.GaussianBlur(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0, 0), 1.0)
+    other = image.copy()
+    other[:60] = cv2.GaussianBlur(rng.integers(0, 255, (60, 160), dtype=np.uint8), (0, 0), 1.0)
+    assert not verification.verify_plane(image, other, np.eye(3), roi=(0, 0, 1, 0.5)).accepted
+    assert verification.verify_plane(image, other, np.eye(3), roi=(0, 0.6, 1, 1)).accepted
+
+
+@pytest.mark.parametrize('hom, message', [
+    (np.full((3, 3), np.nan), 'finite'),
+    (np.eye(2), 'shape'),
+    (np.zeros((3, 3)), 'singular'),
+    ([['a', 'b', 'c']] * 3, 'numbers'),
+])
+def test_bad_homography_raises(hom: object, message: str) -> None:
+    image = np.zeros((48, 64), np.uint8)
+    with pytest.raises(ValueError, match=message):
+        verification.verify_plane(image, image, hom)
+    with pytest.raises(ValueError, match=message):
+        verification.swap_evidence(hom, 64, 48)
+
+
+def test_bad_images_raise() -> None:
+    image = np.zeros((48, 64), np.uint8)
+    with pytest.raises(ValueError, match='differ in size'):
+        verification.verify_plane(image, np.zeros((48, 65), np.uint8), np.eye(3))
+    with pytest.raises(ValueError, match='uint8'):
+        verification.verify_plane(image.astype(np.float32), image, np.eye(3))
+    with pytest.raises(ValueError, match='2-D'):
+        verification.verify_plane(np.zeros((48, 64, 3), np.uint8), image, np.eye(3))
+    with pytest.raises(ValueError, match='roi'):
+        verification.verify_plane(image, image, np.eye(3), roi=(0.5, 0, 0.2, 1))
+    with pytest.raises(ValueError, match='rows'):
+        verification.swap_evidence(np.eye(3), 64, 48, rows=(0.9, 0.1))
+
+
+@pytest.mark.parametrize('field, value', [
+    ('working_width_px', 8), ('window_px', 4), ('ncc_threshold', 1.5),
+    ('probe_shift_px', 0.0), ('reject_score', 0.5), ('min_texture', float('nan')),
+])
+def test_config_validates(field: str, value: float) -> None:
+    with pytest.raises(ValueError, match=field):
+        verification.VerificationConfig(**{field: value})
+
+
+def test_confidence_follows_the_documented_ramp() -> None:
+    cfg = verification.VerificationConfig(reject_score=0.1, accept_score=0.3)
+    rng = np.random.default_rng(3)
+    image = cv2.GaussianBlur(rng.integers(0, 255, (120, 160), dtype=np.uint8), (0, 0), 1.0)
+    result = verification.verify_plane(image, image, np.eye(3), cfg)
+    expected = np.clip((result.score - 0.1) / 0.2, 0.0, 1.0)
+    assert result.confidence == pytest.approx(expected)
+    assert result.accepted == (result.confidence >= 0.5)
