@@ -17,14 +17,14 @@ import numpy as np
 
 
 @dataclass(frozen=True)
-class PointScene:
-    """Left and right points with the truth.
+class _SceneTruth:
+    """Left and right features with the truth.
 
     Attributes:
-        left: (N, 2) float64 left points.
-        right: (M, 2) float64 right points, shuffled (no correspondence by index).
+        left: (N, K) float64 left features.
+        right: (M, K) float64 right features, shuffled (no correspondence by index).
         homography: (3, 3) float64 true plane homography, left to right.
-        on_plane: (N,) bool, left points that lie on the plane.
+        on_plane: (N,) bool, left features that lie on the plane.
         width: Image width in pixels.
         height: Image height in pixels.
 
@@ -36,6 +36,15 @@ class PointScene:
     on_plane: np.ndarray
     width: int
     height: int
+
+
+@dataclass(frozen=True)
+class PointScene(_SceneTruth):
+    """Left and right points with the truth.
+
+    ``left`` is (N, 2) float64, ``right`` (M, 2) float64 and shuffled, ``on_plane`` marks the
+    left points on the plane; the other attributes are those of every scene with truth.
+    """
 
 
 def random_plane_homography(rng: np.random.Generator, width: int = 640,
@@ -131,26 +140,13 @@ def plane_error_px(estimate: np.ndarray, truth: np.ndarray, points: np.ndarray) 
 
 
 @dataclass(frozen=True)
-class LineScene:
+class LineScene(_SceneTruth):
     """Left and right line segments with the truth.
 
-    Attributes:
-        left: (N, 4) float64 left segments ``(x1, y1, x2, y2)``.
-        right: (M, 4) float64 right segments, shuffled, with endpoints that do not correspond
-            to the left ones (each right segment is a random part of the mapped line).
-        homography: (3, 3) float64 true plane homography, left to right.
-        on_plane: (N,) bool, left segments that lie on the plane.
-        width: Image width in pixels.
-        height: Image height in pixels.
-
+    ``left`` is (N, 4) float64 segments ``(x1, y1, x2, y2)``; ``right`` is (M, 4) float64,
+    shuffled, with endpoints that do not correspond to the left ones (each right segment is a
+    random part of the mapped line); ``on_plane`` marks the left segments on the plane.
     """
-
-    left: np.ndarray
-    right: np.ndarray
-    homography: np.ndarray
-    on_plane: np.ndarray
-    width: int
-    height: int
 
 
 def line_scene(rng: np.random.Generator, n_lines: int = 120, outlier_fraction: float = 0.3,
@@ -178,25 +174,7 @@ def line_scene(rng: np.random.Generator, n_lines: int = 120, outlier_fraction: f
 
     """
     h = random_plane_homography(rng, width, height) if homography is None else homography
-    segs = []
-    while len(segs) < n_lines:
-        length = rng.uniform(40.0, 220.0)
-        if directions_deg is not None:
-            angle = np.radians(rng.choice(np.asarray(directions_deg, np.float64)))
-        else:
-            angle = rng.uniform(0.0, np.pi)
-        d = np.array([np.cos(angle), np.sin(angle)])
-        if through_point is not None:
-            start = np.asarray(through_point) + rng.uniform(-300.0, 300.0) * d
-        else:
-            start = rng.uniform([0, 0], [width - 1, height - 1])
-        end = start + length * d
-        seg = np.array([start, end])
-        mapped = apply_homography(h, seg)
-        if (np.all((seg >= 0) & (seg <= [width - 1, height - 1]))
-                and np.all((mapped >= 0) & (mapped <= [width - 1, height - 1]))):
-            segs.append(seg.ravel())
-    left = np.array(segs)
+    left = _left_segments(rng, h, n_lines, width, height, directions_deg, through_point)
     right = apply_homography(h, left.reshape(-1, 2)).reshape(-1, 4)
     on_plane = rng.random(n_lines) >= outlier_fraction
     n_off = int(np.count_nonzero(~on_plane))
@@ -218,3 +196,28 @@ def line_scene(rng: np.random.Generator, n_lines: int = 120, outlier_fraction: f
     right = right[rng.permutation(right.shape[0])]
     return LineScene(left=left[~only_right], right=right, homography=h,
                      on_plane=on_plane[~only_right], width=width, height=height)
+
+
+def _left_segments(rng: np.random.Generator, h: np.ndarray, n_lines: int, width: int,
+                   height: int, directions_deg: np.ndarray | None,
+                   through_point: tuple[float, float] | None) -> np.ndarray:
+    """Return (n_lines, 4) float64 left segments inside both images (mapped by ``h``)."""
+    segs = []
+    while len(segs) < n_lines:
+        length = rng.uniform(40.0, 220.0)
+        if directions_deg is not None:
+            angle = np.radians(rng.choice(np.asarray(directions_deg, np.float64)))
+        else:
+            angle = rng.uniform(0.0, np.pi)
+        d = np.array([np.cos(angle), np.sin(angle)])
+        if through_point is not None:
+            start = np.asarray(through_point) + rng.uniform(-300.0, 300.0) * d
+        else:
+            start = rng.uniform([0, 0], [width - 1, height - 1])
+        end = start + length * d
+        seg = np.array([start, end])
+        mapped = apply_homography(h, seg)
+        if (np.all((seg >= 0) & (seg <= [width - 1, height - 1]))
+                and np.all((mapped >= 0) & (mapped <= [width - 1, height - 1]))):
+            segs.append(seg.ravel())
+    return np.array(segs)

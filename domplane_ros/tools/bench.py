@@ -15,48 +15,17 @@ thread, names the machine, and prints for 300, 500 and 1000 points per view (30 
 
 from __future__ import annotations
 
-import argparse
-import os
-import platform
 import sys
 import time
 
-for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
-    os.environ.setdefault(_var, '1')
-
-import cv2  # noqa: E402
-from domplane_ros.config import EstimatorConfig, PriorConfig  # noqa: E402
-from domplane_ros.core.estimator import estimate_plane  # noqa: E402
-from domplane_ros.core.homography import apply_homography  # noqa: E402
-from domplane_ros.core.potentials import POTENTIALS  # noqa: E402
-from domplane_ros.sim.synthetic import (displace_homography, plane_error_px,  # noqa: E402
-                                        point_scene)
-import numpy as np  # noqa: E402
-
-
-def machine_name() -> str:
-    """Return the host name, CPU model and Python/numpy versions, on one line."""
-    cpu = platform.processor() or 'unknown CPU'
-    try:
-        with open('/proc/cpuinfo', encoding='utf-8') as stream:
-            for line in stream:
-                if line.startswith('model name'):
-                    cpu = line.split(':', 1)[1].strip()
-                    break
-    except OSError:
-        pass
-    return (f'{platform.node()} | {cpu} | {os.cpu_count()} cores, 1 used | '
-            f'Python {platform.python_version()} | numpy {np.__version__} | '
-            f'OpenCV {cv2.__version__}')
-
-
-def _progress(iterable, total: int, desc: str):
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover - tqdm is in requirements.txt
-        return iterable
-    return tqdm(iterable, total=total, desc=desc, file=sys.stderr, leave=False,
-                disable=not sys.stderr.isatty())
+import cv2
+from domplane_ros.config import EstimatorConfig, PriorConfig
+from domplane_ros.core.estimator import estimate_plane
+from domplane_ros.core.homography import apply_homography
+from domplane_ros.core.potentials import POTENTIALS
+from domplane_ros.sim.synthetic import displace_homography, plane_error_px, point_scene
+from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
+import numpy as np
 
 
 def _stats_ms(times: list[float]) -> str:
@@ -71,7 +40,7 @@ def bench_speed(n_points: int, runs: int, potential: str) -> None:
     opts = EstimatorConfig(potential=potential)
     prior = PriorConfig(focal_px=(500, 800), baseline_over_height=(0.08, 0.3),
                         tilt_deg=(15, 45), vergence_deg=(-1, 3))
-    for seed in _progress(range(runs), runs, f'{n_points} points'):
+    for seed in progress(range(runs), f'{n_points} points'):
         rng = np.random.default_rng(seed)
         scene = point_scene(rng, n_points, outlier_fraction=0.3, missing_fraction=0.1)
         h0 = displace_homography(scene.homography, 2.0, rng)
@@ -112,7 +81,7 @@ def bench_basin(n_points: int, runs: int, displacements: tuple[float, ...]) -> N
         times = []
         for d in displacements:
             ok = 0
-            for seed in _progress(range(runs), runs, f'{name} {d:g}px'):
+            for seed in progress(range(runs), f'{name} {d:g}px'):
                 rng = np.random.default_rng(10_000 + seed)
                 scene = point_scene(rng, n_points)
                 h0 = displace_homography(scene.homography, d, rng)
@@ -129,19 +98,19 @@ def bench_basin(n_points: int, runs: int, displacements: tuple[float, ...]) -> N
 
 def main(argv: list[str] | None = None) -> int:
     """Run the benchmark and print its figures."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__)
     parser.add_argument('--runs', type=int, default=100, help='scenes per speed row')
     parser.add_argument('--basin-runs', type=int, default=100, help='scenes per basin cell')
     args = parser.parse_args(argv)
-    cv2.setNumThreads(1)
     print(f'machine: {machine_name()}')
     print('times in ms: median p95; warm start = initial H 2 px off at the image corners; '
           '30 % off-plane, 10 % missing')
     print(f'{"points":>6s}  {"potential":20s}      median     p95')
-    for n in (300, 500, 1000):
-        for potential in ('truncated_quadratic', 'huber', 'geman_mcclure'):
-            bench_speed(n, args.runs, potential)
-    bench_basin(500, args.basin_runs, (5.0, 10.0, 20.0, 40.0))
+    with one_core():
+        for n in (300, 500, 1000):
+            for potential in ('truncated_quadratic', 'huber', 'geman_mcclure'):
+                bench_speed(n, args.runs, potential)
+        bench_basin(500, args.basin_runs, (5.0, 10.0, 20.0, 40.0))
     return 0
 
 

@@ -14,40 +14,20 @@ pinned to one thread). It prints:
 
 from __future__ import annotations
 
-import argparse
-import os
 import sys
 import time
-from types import SimpleNamespace
+from typing import Any, Callable
 
-for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
-    os.environ.setdefault(_var, '1')
-
-import cv2  # noqa: E402
-from domplane_ros.config import PlaneNodeConfig, PriorConfig  # noqa: E402
-from domplane_ros.core.homography import apply_homography  # noqa: E402
-from domplane_ros.core.image import message_to_gray  # noqa: E402
-from domplane_ros.sim.scene import scene_sequence  # noqa: E402
-from domplane_ros.stream.health import PairChecks  # noqa: E402
-from domplane_ros.stream.pipeline import PlanePipeline  # noqa: E402
-from domplane_ros.tools.bench import machine_name  # noqa: E402
-import numpy as np  # noqa: E402
-
-
-def _message(gray: np.ndarray) -> SimpleNamespace:
-    """Return a duck-typed mono8 sensor_msgs/Image."""
-    h, w = gray.shape
-    return SimpleNamespace(height=h, width=w, encoding='mono8', is_bigendian=0, step=w,
-                           data=gray.tobytes())
-
-
-def _prior_for(frame) -> PriorConfig:
-    s = frame.setup
-    return PriorConfig(focal_px=(0.8 * s.focal_px, 1.2 * s.focal_px),
-                       baseline_over_height=(0.7 * s.baseline_over_height,
-                                             1.3 * s.baseline_over_height),
-                       tilt_deg=(s.tilt_deg - 8, s.tilt_deg + 8),
-                       vergence_deg=(s.vergence_deg - 2, s.vergence_deg + 2))
+import cv2
+from domplane_ros.config import PlaneNodeConfig, PriorConfig
+from domplane_ros.core.image import message_to_gray
+from domplane_ros.sim.generators import scene_sequence
+from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
+from domplane_ros.stream.health import PairChecks
+from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.tools.common import (machine_name, mono8_message, one_core, prior_around,
+                                       tool_parser)
+import numpy as np
 
 
 def _orb_pipeline(orb, matcher, left_msg, right_msg) -> np.ndarray | None:
@@ -66,20 +46,16 @@ def _orb_pipeline(orb, matcher, left_msg, right_msg) -> np.ndarray | None:
     return h
 
 
-def _error(h, frame) -> float:
-    if h is None:
-        return float('inf')
-    ys, xs = np.nonzero(frame.plane_left & frame.visible_in_right)
-    pts = np.stack([xs, ys], axis=1)[::37].astype(np.float64)
-    diff = apply_homography(h, pts) - apply_homography(frame.homography, pts)
-    return float(np.mean(np.linalg.norm(diff, axis=1)))
+def _error(h: np.ndarray | None, frame) -> float:
+    """Return the transfer error over every 37th visible floor pixel (inf without H)."""
+    return transfer_error_px(h, frame, every_floor_pixel(frame, 37))
 
 
 def bench_latency(width: int, height: int, n_frames: int, seed: int) -> None:
     """Print full-pipeline latency (warm) and the ORB + MAGSAC baseline for one size."""
     frames = scene_sequence(n_frames, seed, width=width, height=height, floor='random')
-    msgs = [(_message(f.left), _message(f.right)) for f in frames]
-    config = PlaneNodeConfig(prior=_prior_for(frames[0]))
+    msgs = [(mono8_message(f.left), mono8_message(f.right)) for f in frames]
+    config = PlaneNodeConfig(prior=prior_around(frames[0].setup))
     pipeline = PlanePipeline(config)
     ours, ours_err = [], []
     for i, (lm, rm) in enumerate(msgs):
@@ -119,55 +95,60 @@ def bench_latency(width: int, height: int, n_frames: int, seed: int) -> None:
     row('ORB + BF + MAGSAC baseline', base, base_err)
 
 
-def bench_dds(seconds: float, rate_hz: float) -> None:
-    """Print image-stamp-to-mask-arrival latency through DDS with a 30 Hz publisher."""
-    import rclpy
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
+def _plane_node(prior: PriorConfig) -> Any:
+    """Return a live plane_node with ``prior``, in this process (rclpy initialised)."""
     from rclpy.parameter import Parameter
-    from rclpy.qos import qos_profile_sensor_data
-    from sensor_msgs.msg import Image
 
     from domplane_ros.ros.node import PlaneNode
-    from domplane_ros.ros.messages import image_msg, stamped_header
 
-    frames = scene_sequence(30, 11, width=640, height=480, floor='random')
-    prior = _prior_for(frames[0])
-    rclpy.init()
-    node = PlaneNode(parameter_overrides=[
+    return PlaneNode(parameter_overrides=[
         Parameter('prior.focal_px', value=list(prior.focal_px)),
         Parameter('prior.baseline_over_height', value=list(prior.baseline_over_height)),
         Parameter('prior.tilt_deg', value=list(prior.tilt_deg)),
         Parameter('prior.vergence_deg', value=list(prior.vergence_deg))])
-    driver = Node('bench_driver')
-    pub_l = driver.create_publisher(Image, 'left/image_raw', qos_profile_sensor_data)
-    pub_r = driver.create_publisher(Image, 'right/image_raw', qos_profile_sensor_data)
+
+
+def _spin_until(executor: Any, done: Callable[[], bool], timeout_s: float,
+                step_s: float) -> None:
+    """Spin ``executor`` until ``done()`` or ``timeout_s`` seconds have passed."""
+    deadline = time.monotonic() + timeout_s
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=step_s)
+
+
+def bench_dds(seconds: float, rate_hz: float) -> None:
+    """Print image-stamp-to-mask-arrival latency through DDS with a 30 Hz publisher."""
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import qos_profile_sensor_data
+    from sensor_msgs.msg import Image
+
+    from domplane_ros.ros.messages import image_msg, stamped_header
+
+    frames = scene_sequence(30, 11, width=640, height=480, floor='random')
+    rclpy.init()
+    node = _plane_node(prior_around(frames[0].setup))
+    driver = rclpy.create_node('bench_driver')
+    pubs = [driver.create_publisher(Image, f'{side}/image_raw', qos_profile_sensor_data)
+            for side in ('left', 'right')]
     latencies: list[float] = []
     sent = [0]
-
-    def on_mask(msg: Image) -> None:
-        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
-        latencies.append(time.time() - stamp)
-
-    driver.create_subscription(Image, 'plane/mask', on_mask, 50)
+    driver.create_subscription(Image, 'plane/mask', lambda msg: latencies.append(
+        time.time() - (msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)), 50)
 
     def tick() -> None:
         frame = frames[sent[0] % len(frames)]
         now_ns = time.time_ns()
-        pub_l.publish(image_msg(frame.left, stamped_header(now_ns, 'left'), 'mono8'))
-        pub_r.publish(image_msg(frame.right, stamped_header(now_ns, 'right'), 'mono8'))
+        for pub, gray, side in zip(pubs, (frame.left, frame.right), ('left', 'right')):
+            pub.publish(image_msg(gray, stamped_header(now_ns, side), 'mono8'))
         sent[0] += 1
 
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     executor.add_node(driver)
-    deadline = time.monotonic() + 3.0
-    while pub_l.get_subscription_count() == 0 and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.05)
+    _spin_until(executor, lambda: pubs[0].get_subscription_count() > 0, 3.0, 0.05)
     driver.create_timer(1.0 / rate_hz, tick)
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.01)
+    _spin_until(executor, lambda: False, seconds, 0.01)
     processed = node.session.counters.processed
     busy = node.slot.dropped
     executor.shutdown()
@@ -184,19 +165,19 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the pipeline benchmark and print its figures."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__)
     parser.add_argument('--frames', type=int, default=60, help='frames per image size')
     parser.add_argument('--dds-seconds', type=float, default=10.0)
     parser.add_argument('--no-dds', action='store_true', help='skip the DDS measurement')
     args = parser.parse_args(argv)
-    cv2.setNumThreads(1)
     print(f'machine: {machine_name()}')
     print(f'{"size":11s} {"pipeline":28s} {"med ms":>8s} {"p95 ms":>8s}   '
           f'{"med err":>8s} {"<1 px":>8s}')
-    bench_latency(640, 480, args.frames, seed=5)
-    bench_latency(1280, 720, args.frames, seed=5)
-    if not args.no_dds:
-        bench_dds(args.dds_seconds, 30.0)
+    with one_core():
+        bench_latency(640, 480, args.frames, seed=5)
+        bench_latency(1280, 720, args.frames, seed=5)
+        if not args.no_dds:
+            bench_dds(args.dds_seconds, 30.0)
     return 0
 
 

@@ -3,7 +3,7 @@
 ``python -m domplane_ros.tools.demo --output demo_output`` (``make demo``):
 
 1. renders a short sequence (40 frames, 640x480) of a stereo head moving over a textured floor
-   past three boxes, with ground truth (:func:`domplane_ros.sim.scene.scene_sequence`);
+   past three boxes, with ground truth (:func:`domplane_ros.sim.generators.scene_sequence`);
 2. records it as a rosbag2 bag, ``OUTPUT/input_bag``, with ``sensor_msgs/Image`` mono8 on
    ``/left/image_raw`` and ``/right/image_raw`` at 30 Hz;
 3. replays it with plane_replay's code (:func:`domplane_ros.replay.cli.run_replay`) into
@@ -27,15 +27,18 @@ from pathlib import Path
 import shutil
 import sys
 import time
-from typing import Sequence
+from typing import Any, Sequence
 
 import cv2
 from domplane_ros.config import load_params_file, PlaneNodeConfig
-from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.mask import overlay
 from domplane_ros.errors import BagError, ConfigError
-from domplane_ros.replay.cli import ReplayedFrame, ReplaySummary, run_replay
-from domplane_ros.sim.scene import scene_sequence, StereoFrame
+from domplane_ros.replay.cli import run_replay
+from domplane_ros.replay.reader import ReplayedFrame
+from domplane_ros.replay.report import ReplaySummary
+from domplane_ros.sim.generators import scene_sequence
+from domplane_ros.sim.model import StereoFrame
+from domplane_ros.sim.truth import floor_points, transfer_error_px
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import get_typestore, Stores
@@ -90,15 +93,10 @@ def transfer_error_vs_truth(homography: np.ndarray | None, truth: StereoFrame,
         ``mean ||H x - H_true x||`` in pixels, or NaN.
 
     """
-    if homography is None:
+    points = floor_points(truth, stride)
+    if homography is None or points.shape[0] == 0:
         return float('nan')
-    keep = (truth.plane_left & truth.visible_in_right)[::stride, ::stride]
-    ys, xs = np.nonzero(keep)
-    if xs.size == 0:
-        return float('nan')
-    pts = np.column_stack([xs * stride, ys * stride]).astype(np.float64)
-    diff = apply_homography(homography, pts) - apply_homography(truth.homography, pts)
-    return float(np.linalg.norm(diff, axis=1).mean())
+    return transfer_error_px(homography, truth, points)
 
 
 def write_stereo_bag(path: Path, frames: Sequence[StereoFrame], storage: str = 'mcap',
@@ -259,9 +257,19 @@ def energy_inliers_figure(frames: Sequence[DemoFrame], path: Path) -> None:
     import matplotlib
     matplotlib.use('Agg')
     from matplotlib import pyplot as plt
-    from matplotlib.ticker import MaxNLocator
 
     fig, (ax_e, ax_i) = plt.subplots(1, 2, figsize=(13, 4.8), dpi=100)
+    _energy_panel(ax_e, frames)
+    _inliers_panel(ax_i, frames)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def _energy_panel(ax_e: Any, frames: Sequence[DemoFrame]) -> None:
+    """Draw the energy per local step of up to four frames spread over the sequence."""
+    from matplotlib.ticker import MaxNLocator
+
     ok_frames = [f for f in frames if len(f.replayed.result.estimate.energy_trace)]
     picks = []
     if ok_frames:
@@ -289,6 +297,9 @@ def energy_inliers_figure(frames: Sequence[DemoFrame], path: Path) -> None:
     if picks:
         ax_e.legend(fontsize=8)
 
+
+def _inliers_panel(ax_i: Any, frames: Sequence[DemoFrame]) -> None:
+    """Draw the inliers (bars) and the transfer error against the truth (line) per frame."""
     index = np.array([f.index for f in frames])
     inliers = np.array([f.replayed.result.n_inliers for f in frames])
     errors = np.array([f.transfer_error_px for f in frames])
@@ -311,9 +322,6 @@ def energy_inliers_figure(frames: Sequence[DemoFrame], path: Path) -> None:
     ax_i.set_ylim(0, 1.3 * max(1, int(inliers.max())))
     ax_i.legend(handles[0] + more[0], handles[1] + more[1], fontsize=8, loc='upper left',
                 ncol=3)
-    fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
 
 
 def _save_rgb(path: Path, rgb: np.ndarray) -> None:
@@ -372,13 +380,13 @@ def run_demo(output: Path, n_frames: int = 40, seed: int = DEFAULT_SEED, width: 
         width: Image width in pixels.
         height: Image height in pixels.
         storage: Storage of the input bag, ``'mcap'`` or ``'sqlite3'``.
-        floor: Floor texture kind (see :data:`domplane_ros.sim.scene.FLOOR_KINDS`).
+        floor: Floor texture kind (see :data:`domplane_ros.sim.textures.FLOOR_KINDS`).
         config: Pipeline configuration (default: the node's defaults).
         progress: Show the replay's progress bar.
 
     Returns:
         A dict with ``frames`` (the :class:`DemoFrame` list), ``summary`` (the replay's
-        :class:`~domplane_ros.replay.cli.ReplaySummary`), ``paths`` (name to written path),
+        :class:`~domplane_ros.replay.report.ReplaySummary`), ``paths`` (name to written path),
         ``removed`` (outputs of an earlier run that were replaced), ``render_s`` and
         ``paragraph`` (the printed summary).
 
@@ -417,16 +425,17 @@ def run_demo(output: Path, n_frames: int = 40, seed: int = DEFAULT_SEED, width: 
             'render_s': render_s, 'paragraph': paragraph}
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the demo from the command line.
+_NOTES = {
+    'input_bag': f'recorded stereo input ({{storage}}: {LEFT_TOPIC}, {RIGHT_TOPIC})',
+    'plane_bag': 'replay output (/plane/homography, /plane/mask, /diagnostics)',
+    'pairs.csv': 'one row per pair (plane_replay --csv)',
+    'contact_sheet.png': 'left images with the mask overlay, error vs truth',
+    'energy_inliers.png': 'energy per iteration; inliers and error per frame',
+    'overlay.png': 'one large overlay',
+}
 
-    Args:
-        argv: Arguments without the program name (default: ``sys.argv[1:]``).
 
-    Returns:
-        0 on success, 2 on a bad argument or params file, 1 if the replay failed.
-
-    """
+def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=f'python -m {PROG}',
         description='Render a stereo sequence with ground truth, record it as a rosbag2 bag, '
@@ -443,24 +452,42 @@ def main(argv: list[str] | None = None) -> int:
                         help='storage of the recorded input bag (default: mcap)')
     parser.add_argument('--params-file', metavar='YAML',
                         help="plane_node parameters file (default: the node's defaults)")
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:
-        return int(exc.code) if isinstance(exc.code, int) else 2
+    return parser
+
+
+def _checked(args: argparse.Namespace) -> tuple[PlaneNodeConfig | None, Path] | str:
+    """Return the configuration and the output folder, or what is wrong with the arguments."""
     if args.frames < 2 or args.width < 64 or args.height < 48:
-        print(f'{PROG}: error: need --frames >= 2 and an image of at least 64x48',
-              file=sys.stderr)
-        return 2
+        return 'need --frames >= 2 and an image of at least 64x48'
     try:
         config = load_params_file(args.params_file) if args.params_file else None
     except ConfigError as err:
-        print(f'{PROG}: error: {err}', file=sys.stderr)
-        return 2
+        return str(err)
     output = Path(args.output)
     if output.exists() and not output.is_dir():
-        print(f'{PROG}: error: output {str(output)!r} exists and is not a folder',
-              file=sys.stderr)
+        return f'output {str(output)!r} exists and is not a folder'
+    return config, output
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the demo from the command line.
+
+    Args:
+        argv: Arguments without the program name (default: ``sys.argv[1:]``).
+
+    Returns:
+        0 on success, 2 on a bad argument or params file, 1 if the replay failed.
+
+    """
+    try:
+        args = _parser().parse_args(argv)
+    except SystemExit as exc:
+        return int(exc.code) if isinstance(exc.code, int) else 2
+    checked = _checked(args)
+    if isinstance(checked, str):
+        print(f'{PROG}: error: {checked}', file=sys.stderr)
         return 2
+    config, output = checked
     existing = [name for name in DEMO_OUTPUTS if (output / name).exists()]
     if existing:
         print(f'Refreshing the previous demo outputs in {output}: {", ".join(existing)} '
@@ -475,17 +502,9 @@ def main(argv: list[str] | None = None) -> int:
         return 1
     print('\n'.join(run['summary'].lines()))
     print('\nWrote:')
-    notes = {
-        'input_bag': f'recorded stereo input ({args.storage}: {LEFT_TOPIC}, {RIGHT_TOPIC})',
-        'plane_bag': 'replay output (/plane/homography, /plane/mask, /diagnostics)',
-        'pairs.csv': 'one row per pair (plane_replay --csv)',
-        'contact_sheet.png': 'left images with the mask overlay, error vs truth',
-        'energy_inliers.png': 'energy per iteration; inliers and error per frame',
-        'overlay.png': 'one large overlay',
-    }
     for name, path in run['paths'].items():
         if path.exists():
-            print(f'  {os.fspath(path):<40} {notes[name]}')
+            print(f'  {os.fspath(path):<40} {_NOTES[name].format(storage=args.storage)}')
     print()
     print(run['paragraph'])
     return 0

@@ -2,7 +2,7 @@
 
 Run ``python -m domplane_ros.tools.evaluate_head [--frames 300] [--speeds 2,5,10,20,30,45,60]
 [--out eval_output/head]``. For every speed, rendered stereo sequences
-(:func:`domplane_ros.sim.scene.head_sequence`, 30 Hz) show a head panning at that speed, tilting
+(:func:`domplane_ros.sim.head.head_sequence`, 30 Hz) show a head panning at that speed, tilting
 between 15 and 45 degrees with that peak speed and verging between -1.5 and 3.5 degrees with a
 fifth of it, over floors with boxes all around (two thirds of the frames on the ``'random'``
 floor, one third on ``'tiles'``, whose periodic joints invite look-alike solutions). Each frame
@@ -31,24 +31,21 @@ from __future__ import annotations
 import argparse
 import csv
 from dataclasses import dataclass, replace
-import math
-import os
 from pathlib import Path
 import sys
 import time
-from typing import Iterable, Sequence
+from typing import Any, Iterable, Sequence
 
-for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
-    os.environ.setdefault(_var, '1')
-
-import cv2  # noqa: E402
-from domplane_ros.config import PlaneNodeConfig, TrackingConfig  # noqa: E402
-from domplane_ros.core.homography import apply_homography  # noqa: E402
-from domplane_ros.core.mask import overlay  # noqa: E402
-from domplane_ros.sim.scene import head_sequence, HeadMotion, StereoFrame  # noqa: E402
-from domplane_ros.stream.pipeline import FrameResult, PlanePipeline  # noqa: E402
-from domplane_ros.tools.bench import machine_name  # noqa: E402
-import numpy as np  # noqa: E402
+import cv2
+from domplane_ros.config import PlaneNodeConfig, TrackingConfig
+from domplane_ros.core.mask import overlay
+from domplane_ros.sim import truth
+from domplane_ros.sim.head import head_sequence, HeadMotion
+from domplane_ros.sim.model import StereoFrame
+from domplane_ros.sim.truth import transfer_error_px
+from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
+from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
+import numpy as np
 
 SPEEDS_DEG_S = (2.0, 5.0, 10.0, 20.0, 30.0, 45.0, 60.0)
 METHODS = ('prediction', 'last', 'cold')
@@ -102,20 +99,7 @@ class MethodRunner:
 
 def floor_points(frame: StereoFrame, step: int = 8) -> np.ndarray:
     """Return (N, 2) float64 left pixels on the floor and seen by the right camera (grid)."""
-    truth = frame.plane_left & frame.visible_in_right
-    sub = np.zeros_like(truth)
-    sub[step // 2::step, step // 2::step] = True
-    ys, xs = np.nonzero(truth & sub)
-    return np.stack([xs, ys], axis=1).astype(np.float64)
-
-
-def transfer_error_px(homography: np.ndarray | None, frame: StereoFrame,
-                      points: np.ndarray) -> float:
-    """Return the mean transfer error of a homography against the frame's truth (inf if None)."""
-    if homography is None or points.shape[0] == 0:
-        return math.inf
-    diff = apply_homography(homography, points) - apply_homography(frame.homography, points)
-    return float(np.mean(np.linalg.norm(diff, axis=1)))
+    return truth.floor_points(frame, step, step // 2)
 
 
 @dataclass
@@ -240,6 +224,26 @@ def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
     """
     records: list[FrameRecord] = []
     sheet: list[tuple[str, np.ndarray]] = []
+    jobs = _sequences(speeds, n_frames, seed)
+    bar = progress(None, 'head sequences (frames)', total=sum(job[3] for job in jobs),
+                   leave=True)
+    for speed, floor, sequence, count in jobs:
+        frames = head_sequence(count, sequence, HeadMotion.at_speed(speed, RATE_HZ), floor=floor,
+                               supersample=supersample)
+        blank = dropout_frames(count, dropout_every, dropout_lengths)
+        runners = [MethodRunner(m) for m in methods]
+        for index, frame in enumerate(frames):
+            _run_frame(frame, index, (speed, floor, sequence), runners, index in blank,
+                       records, sheet if keep_every and index % keep_every == keep_every // 2
+                       else None)
+            bar.update(1)
+    bar.close()
+    return records, sheet
+
+
+def _sequences(speeds: Sequence[float], n_frames: int, seed: int
+               ) -> list[tuple[float, str, int, int]]:
+    """Return ``(speed, floor, sequence seed, frames)`` of every sequence to render."""
     jobs = []
     for s_index, speed in enumerate(speeds):
         for f_index, (floor, share) in enumerate(FLOORS):
@@ -247,46 +251,29 @@ def run(speeds: Sequence[float], n_frames: int, seed: int = 0,
                 n_frames - sum(int(round(sh * n_frames)) for _, sh in FLOORS[:-1]))
             if count > 0:
                 jobs.append((speed, floor, seed + 10 * s_index + f_index, count))
-    total = sum(job[3] for job in jobs)
-    bar = _progress_bar(total)
-    for speed, floor, sequence, count in jobs:
-        runners = [MethodRunner(m) for m in methods]
-        motion = HeadMotion.at_speed(speed, RATE_HZ)
-        if bar is None:
-            print(f'{speed:g} deg/s, {floor} floor: {count} frames', file=sys.stderr,
-                  flush=True)
-        blank = dropout_frames(count, dropout_every, dropout_lengths)
-        for index, frame in enumerate(head_sequence(count, sequence, motion, floor=floor,
-                                                    supersample=supersample)):
-            points = floor_points(frame)
-            shown = frame
-            if index in blank:
-                grey = np.full_like(frame.left, 128)
-                shown = replace(frame, left=grey, right=grey.copy())
-            for runner in runners:
-                result, ms = runner.process(shown, index)
-                error = transfer_error_px(result.homography, frame, points)
-                records.append(FrameRecord(speed, floor, sequence, index, runner.method,
-                                           result.ok, error, result.state, result.warm_start,
-                                           result.candidates, ms, index in blank))
-                if (keep_every and runner.method == 'prediction'
-                        and index % keep_every == keep_every // 2):
-                    label = (f'{speed:g} deg/s {floor} #{index}: '
-                             + (f'{error:.2f} px' if result.ok else result.state))
-                    sheet.append((label, overlay(frame.left, result.mask)))
-            if bar is not None:
-                bar.update(1)
-    if bar is not None:
-        bar.close()
-    return records, sheet
+    return jobs
 
 
-def _progress_bar(total: int):  # noqa: ANN202 - tqdm or None
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover - tqdm is in requirements.txt
-        return None
-    return tqdm(total=total, desc='head sequences (frames)', file=sys.stderr, disable=None)
+def _run_frame(frame: StereoFrame, index: int, where: tuple[float, str, int],
+               runners: Sequence[MethodRunner], dropout: bool, records: list[FrameRecord],
+               sheet: list[tuple[str, np.ndarray]] | None) -> None:
+    """Run every method on one frame (blank if ``dropout``); keep an overlay if ``sheet``."""
+    speed, floor, sequence = where
+    points = floor_points(frame)
+    shown = frame
+    if dropout:
+        grey = np.full_like(frame.left, 128)
+        shown = replace(frame, left=grey, right=grey.copy())
+    for runner in runners:
+        result, ms = runner.process(shown, index)
+        error = transfer_error_px(result.homography, frame, points)
+        records.append(FrameRecord(speed, floor, sequence, index, runner.method, result.ok,
+                                   error, result.state, result.warm_start, result.candidates,
+                                   ms, dropout))
+        if sheet is not None and runner.method == 'prediction':
+            label = (f'{speed:g} deg/s {floor} #{index}: '
+                     + (f'{error:.2f} px' if result.ok else result.state))
+            sheet.append((label, overlay(frame.left, result.mask)))
 
 
 def table(records: Sequence[FrameRecord], speeds: Iterable[float],
@@ -323,6 +310,9 @@ def write_csv(path: Path, records: Sequence[FrameRecord]) -> None:
                              r.candidates, f'{r.time_ms:.2f}'])
 
 
+_COLOURS = {'prediction': 'tab:green', 'last': 'tab:orange', 'cold': 'tab:blue'}
+
+
 def plots(out: Path, records: Sequence[FrameRecord], summaries: dict,
           speeds: Sequence[float], methods: Sequence[str] = METHODS) -> None:
     """Write locked.png, times.png and errors.png."""
@@ -330,7 +320,14 @@ def plots(out: Path, records: Sequence[FrameRecord], summaries: dict,
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    colours = {'prediction': 'tab:green', 'last': 'tab:orange', 'cold': 'tab:blue'}
+    _locked_plot(plt, out, summaries, speeds, methods)
+    _times_plot(plt, out, summaries, speeds, methods)
+    _errors_plot(plt, out, records, speeds, methods)
+
+
+def _locked_plot(plt: Any, out: Path, summaries: dict, speeds: Sequence[float],
+                 methods: Sequence[str]) -> None:
+    colours = _COLOURS
     fig, ax = plt.subplots(figsize=(7, 4))
     for method in methods:
         ys = [100 * summaries[(s, method)]['locked'] for s in speeds if (s, method) in summaries]
@@ -345,6 +342,10 @@ def plots(out: Path, records: Sequence[FrameRecord], summaries: dict,
     fig.savefig(out / 'locked.png', dpi=110)
     plt.close(fig)
 
+
+def _times_plot(plt: Any, out: Path, summaries: dict, speeds: Sequence[float],
+                methods: Sequence[str]) -> None:
+    colours = _COLOURS
     fig, ax = plt.subplots(figsize=(7, 4))
     width = 0.8 / max(len(methods), 1)
     xs = np.arange(len(speeds))
@@ -366,6 +367,10 @@ def plots(out: Path, records: Sequence[FrameRecord], summaries: dict,
     fig.savefig(out / 'times.png', dpi=110)
     plt.close(fig)
 
+
+def _errors_plot(plt: Any, out: Path, records: Sequence[FrameRecord], speeds: Sequence[float],
+                 methods: Sequence[str]) -> None:
+    colours = _COLOURS
     fast = sorted(speeds)[-2:]
     fig, axes = plt.subplots(len(fast), 1, figsize=(9, 3 * len(fast)), squeeze=False)
     for ax, speed in zip(axes[:, 0], fast):
@@ -407,9 +412,8 @@ def contact_sheet(path: Path, sheet: Sequence[tuple[str, np.ndarray]], cols: int
     cv2.imwrite(str(path), cv2.cvtColor(grid, cv2.COLOR_RGB2BGR))
 
 
-def main(argv: list[str] | None = None) -> int:
-    """Run the evaluation; print the table; write the outputs."""
-    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+def _parser() -> argparse.ArgumentParser:
+    parser = tool_parser(__doc__)
     parser.add_argument('--frames', type=int, default=300,
                         help='frames per speed (default 300)')
     parser.add_argument('--speeds', default=','.join(f'{s:g}' for s in SPEEDS_DEG_S),
@@ -424,6 +428,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument('--dropout-lengths', default='1,3',
                         help='comma-separated drop-out lengths in frames, used in turn')
     parser.add_argument('--out', default='eval_output/head', help='output folder')
+    return parser
+
+
+def _parse(argv: list[str] | None) -> tuple[argparse.Namespace, list[float], list[str],
+                                            list[int]]:
+    """Return the arguments, the speeds, the methods and the drop-out lengths, checked."""
+    parser = _parser()
     args = parser.parse_args(argv)
     try:
         speeds = [float(s) for s in args.speeds.split(',') if s.strip()]
@@ -437,32 +448,42 @@ def main(argv: list[str] | None = None) -> int:
         parser.error('--supersample must be >= 1')
     if args.frames < 3 or not speeds or any(not 0 <= s <= 1000 for s in speeds):
         parser.error('need --frames >= 3 and speeds in [0, 1000] deg/s')
-    cv2.setNumThreads(1)
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    keep = max(1, args.frames // 3)
     try:
         lengths = [int(v) for v in args.dropout_lengths.split(',') if v.strip()]
     except ValueError:
         parser.error(f'--dropout-lengths must be integers, got {args.dropout_lengths!r}')
     if args.dropout_every < 0 or any(v < 1 for v in lengths):
         parser.error('--dropout-every must be >= 0 and drop-out lengths >= 1')
-    records, sheet = run(speeds, args.frames, args.seed, methods, keep_every=keep,
-                         supersample=args.supersample, dropout_every=args.dropout_every,
-                         dropout_lengths=lengths)
+    return args, speeds, methods, lengths
+
+
+def _header(args: argparse.Namespace, methods: Sequence[str], lengths: Sequence[int]) -> str:
+    """Return the summary's heading: the run, the machine and the command."""
+    return (f'# Active head evaluation\n\n{args.frames} frames per speed at {RATE_HZ:g} Hz '
+            f'(floors: ' + ', '.join(f'{f} {100 * s:.0f} %' for f, s in FLOORS)
+            + f'), seed {args.seed}, 640x480 rendered with {args.supersample}x'
+            f'{args.supersample} rays per pixel; one thread; machine: {machine_name()}\n\n'
+            f'Command: python -m domplane_ros.tools.evaluate_head --frames {args.frames} '
+            f'--speeds {args.speeds} --methods {",".join(methods)} --seed {args.seed} '
+            f'--supersample {args.supersample}'
+            + (f' --dropout-every {args.dropout_every} --dropout-lengths '
+               f'{",".join(map(str, lengths))}' if args.dropout_every else '') + '\n\n'
+            + ('Drop-outs: both images blank (uniform grey) for the given lengths in turn; '
+               'drop-out frames count as not locked; re-lock frames count the frames after '
+               'the input came back.\n\n' if args.dropout_every else ''))
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run the evaluation; print the table; write the outputs."""
+    args, speeds, methods, lengths = _parse(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    with one_core():
+        records, sheet = run(speeds, args.frames, args.seed, methods,
+                             keep_every=max(1, args.frames // 3), supersample=args.supersample,
+                             dropout_every=args.dropout_every, dropout_lengths=lengths)
     text, summaries = table(records, speeds, methods)
-    header = (f'# Active head evaluation\n\n{args.frames} frames per speed at {RATE_HZ:g} Hz '
-              f'(floors: ' + ', '.join(f'{f} {100 * s:.0f} %' for f, s in FLOORS)
-              + f'), seed {args.seed}, 640x480 rendered with {args.supersample}x'
-              f'{args.supersample} rays per pixel; one thread; machine: {machine_name()}\n\n'
-              f'Command: python -m domplane_ros.tools.evaluate_head --frames {args.frames} '
-              f'--speeds {args.speeds} --methods {",".join(methods)} --seed {args.seed} '
-              f'--supersample {args.supersample}'
-              + (f' --dropout-every {args.dropout_every} --dropout-lengths '
-                 f'{",".join(map(str, lengths))}' if args.dropout_every else '') + '\n\n'
-              + ('Drop-outs: both images blank (uniform grey) for the given lengths in turn; '
-                 'drop-out frames count as not locked; re-lock frames count the frames after '
-                 'the input came back.\n\n' if args.dropout_every else ''))
+    header = _header(args, methods, lengths)
     (out / 'summary.md').write_text(header + text, encoding='utf-8')
     write_csv(out / 'frames.csv', records)
     plots(out, records, summaries, speeds, methods)

@@ -5,18 +5,18 @@ Run ``python -m domplane_ros.tools.evaluate_lines [--scenes N] [--data DIR] [--o
 Every pair is solved in the same process by four methods: the product's pipeline
 (:class:`~domplane_ros.stream.pipeline.PlanePipeline`, cold start from the prior) with
 ``features.kind`` = ``points``, ``lines`` and ``both``, and the correspondence baseline of
-:mod:`domplane_ros.tools.evaluate` (ORB 2000, cross-checked Hamming matches, USAC_MAGSAC at 1 px).
-All single-threaded. Scene classes:
+:mod:`domplane_ros.tools.evaluation.methods` (ORB 2000, cross-checked Hamming matches,
+USAC_MAGSAC at 1 px). All single-threaded. Scene classes:
 
-* rendered low-texture floors (:data:`~domplane_ros.sim.scene.PLAIN_FLOOR_KINDS`: ``tiles_plain``
-  and ``planks_plain``, flat albedo with faint noise between contrasting joints), and the
-  textured ``random`` floor as the control; ``--scenes`` seeds each (``random_scene(seed,
-  floor=kind)``: random set-up within the default prior, 1-5 boxes, horizon or wall). The
-  error is the mean transfer error over the floor pixels seen by both cameras (every 4th
-  pixel); a scene is solved when it is below 1 px;
+* rendered low-texture floors (:data:`~domplane_ros.sim.textures.PLAIN_FLOOR_KINDS`:
+  ``tiles_plain`` and ``planks_plain``, flat albedo with faint noise between contrasting
+  joints), and the textured ``random`` floor as the control; ``--scenes`` seeds each
+  (``random_scene(seed, floor=kind)``: random set-up within the default prior, 1-5 boxes,
+  horizon or wall). The error is the mean transfer error over the floor pixels seen by both
+  cameras (every 4th pixel); a scene is solved when it is below 1 px;
 * KITTI 2015 000046 (road error against the ground-truth disparity plane, road ROI, as in
-  :mod:`domplane_ros.tools.evaluate`) and the OpenCV chessboard pairs (error on the board corners;
-  solved below 2 px), from ``--data`` (default ``../shared/data`` or ``test/data``).
+  :mod:`domplane_ros.tools.evaluate`) and the OpenCV chessboard pairs (error on the board
+  corners; solved below 2 px), from ``--data`` (default ``../shared/data`` or ``test/data``).
 
 Outputs in ``--out`` (default ``eval_output/lines/``): ``summary.md`` (the table, also on
 stdout), ``results.csv`` (one row per pair and method), ``success.png`` (success rate per
@@ -26,32 +26,31 @@ points only against both, with inlier corners and segments drawn).
 
 from __future__ import annotations
 
-import argparse
 import csv
 from dataclasses import dataclass, field, replace
 import math
-import os
 from pathlib import Path
 import sys
 import time
 from typing import Any, Sequence
 
-for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
-    os.environ.setdefault(_var, '1')
-
-import cv2  # noqa: E402
-from domplane_ros.config import FeatureConfig, PlaneNodeConfig  # noqa: E402
-from domplane_ros.core.homography import apply_homography  # noqa: E402
-from domplane_ros.core.mask import overlay  # noqa: E402
-from domplane_ros.sim.scene import PLAIN_FLOOR_KINDS, random_scene  # noqa: E402
-from domplane_ros.stream.pipeline import debug_overlay, FrameResult, PlanePipeline  # noqa: E402
-from domplane_ros.tools.bench import machine_name  # noqa: E402
-from domplane_ros.tools.evaluate import (chessboard_corners, chessboard_pairs,  # noqa: E402
-                                         CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX, default_data_dir,
-                                         KITTI_DIR, KITTI_PRIOR, kitti_reference, KITTI_ROI,
-                                         mean_transfer_px, one_shot_search, OPENCV_DIR, progress,
-                                         read_gray, RENDERED_PRIOR, run_orb_magsac, SOLVED_PX)
-import numpy as np  # noqa: E402
+from domplane_ros.config import FeatureConfig, PlaneNodeConfig
+from domplane_ros.core.homography import apply_homography
+from domplane_ros.core.mask import overlay
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.textures import PLAIN_FLOOR_KINDS
+from domplane_ros.sim.truth import floor_points
+from domplane_ros.stream.pipeline import debug_overlay, FrameResult, PlanePipeline
+from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
+from domplane_ros.tools.evaluation.datasets import (CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX,
+                                                    KITTI_PRIOR, KITTI_ROI, RENDERED_PRIOR,
+                                                    SOLVED_PX)
+from domplane_ros.tools.evaluation.methods import one_shot_search, run_orb_magsac
+from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
+                                                      default_data_dir, KITTI_DIR,
+                                                      kitti_reference, mean_transfer_px,
+                                                      OPENCV_DIR, read_gray)
+import numpy as np
 
 METHODS = ('points', 'lines', 'both', 'orb_magsac')
 METHOD_NAMES = {'points': 'points only', 'lines': 'lines only', 'both': 'points + lines',
@@ -147,11 +146,7 @@ def evaluate_rendered(n_scenes: int, classes: Sequence[str] = RENDERED_CLASSES,
     cases = []
     for kind, seed in progress(jobs, 'rendered scenes'):
         frame = random_scene(seed, floor=kind)
-        truth = frame.plane_left & frame.visible_in_right
-        sub = np.zeros_like(truth)
-        sub[::4, ::4] = True
-        ys, xs = np.nonzero(truth & sub)
-        points = np.stack([xs, ys], axis=1).astype(np.float64)
+        points = floor_points(frame, step=4)
         target = apply_homography(frame.homography, points)
         case = LineCase(kind, str(seed), frame.left)
         cases.append(run_methods(case, frame.left, frame.right, config, points, target,
@@ -359,8 +354,7 @@ def contact_sheet(path: Path, cases: Sequence[LineCase]) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the evaluation and write the outputs."""
-    parser = argparse.ArgumentParser(prog='python -m domplane_ros.tools.evaluate_lines',
-                                     description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__, prog='python -m domplane_ros.tools.evaluate_lines')
     parser.add_argument('--scenes', type=int, default=40,
                         help='rendered scenes per floor class (default 40)')
     parser.add_argument('--first-seed', type=int, default=0)
@@ -371,11 +365,11 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     if args.scenes < 0:
         parser.error('--scenes must be >= 0')
-    cv2.setNumThreads(1)
     args.out.mkdir(parents=True, exist_ok=True)
     data = args.data or default_data_dir()
-    cases: list[Any] = evaluate_rendered(args.scenes, first_seed=args.first_seed)
-    cases += evaluate_real(data)
+    with one_core():
+        cases: list[Any] = evaluate_rendered(args.scenes, first_seed=args.first_seed)
+        cases += evaluate_real(data)
     table = markdown_table(summary_rows(cases))
     aim = aim_text(cases)
     text = (f'Line features, {machine_name()}, one thread; cold start from the prior; '

@@ -2,7 +2,7 @@
 
 Run ``python -m domplane_ros.tools.evaluate_verification [--first-seed S] [--count N]
 [--data DIR] [--cache DIR] [--out DIR]``. For every rendered scene
-(:func:`~domplane_ros.sim.scene.random_scene` with a random right-camera gain and offset) it
+(:func:`~domplane_ros.sim.random_scene` with a random right-camera gain and offset) it
 verifies the true plane and wrong planes of these kinds, and on the real pairs the reference
 plane and shifted or swapped ones:
 
@@ -24,35 +24,37 @@ The table gives, per kind, the score's min / median / max, how many were accepte
 swap detector's verdicts. The picture ``verification_maps.png`` shows the agreement maps of
 the true plane and a look-alike on one scene.
 
-The readers and references of the real pairs come from :mod:`domplane_ros.tools.evaluate`.
+The readers and references of the real pairs come from
+:mod:`domplane_ros.tools.evaluation.references`.
 """
 
 from __future__ import annotations
 
 import argparse
 import math
-import os
 from pathlib import Path
 import sys
 import time
 from typing import Any, Iterator, Sequence
 
-for _var in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
-    os.environ.setdefault(_var, '1')
-
-import cv2  # noqa: E402
-from domplane_ros.config import PriorConfig  # noqa: E402
-from domplane_ros.core import prior, verification  # noqa: E402
-from domplane_ros.core.homography import apply_homography, fit_homography  # noqa: E402
-from domplane_ros.sim import scene  # noqa: E402
-from domplane_ros.tools import evaluate  # noqa: E402
-from domplane_ros.tools.bench import machine_name  # noqa: E402
-import numpy as np  # noqa: E402
+import cv2
+from domplane_ros.config import PriorConfig
+from domplane_ros.core import prior, verification
+from domplane_ros.core.homography import apply_homography, fit_homography
+from domplane_ros.sim.generators import random_boxes, random_scene, random_setup
+from domplane_ros.sim.model import BACKGROUNDS
+from domplane_ros.sim.textures import FLOOR_KINDS
+from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
+from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
+                                                      default_data_dir, KITTI_DIR,
+                                                      kitti_reference, OPENCV_DIR, read_gray)
+from domplane_ros.tools.evaluation.tables import markdown_table
+import numpy as np
 
 WRONG_PX = 5.0
 SHIFTS_PX = (5, 10, 20, 40, 80)
 # Floor periods in world units (camera height 1), along the texture's own axes, as rendered
-# by sim/scene.py: tiles 64 texels of 0.005, planks 32 texels wide, checker colour period 2 x 64
+# by sim/textures.py: tiles 64 texels of 0.005, planks 32 texels wide, checker colour period 2 x 64
 # texels (a diagonal step of one square also keeps the colour), plain tiles 128 texels.
 FLOOR_PERIODS = {
     'tiles': ((0.32, 0.0), (0.0, 0.32), (-0.32, 0.0), (0.0, -0.32)),
@@ -75,7 +77,7 @@ def _frame_arrays(seed: int, floor: str | None, cache: Path | None) -> dict[str,
         with np.load(cache / name) as data:
             arrays = {key: data[key] for key in data.files}
     else:
-        frame = scene.random_scene(seed, floor=floor, gain=None, offset=None)
+        frame = random_scene(seed, floor=floor, gain=None, offset=None)
         s = frame.setup
         arrays = {'left': frame.left, 'right': frame.right, 'H': frame.homography,
                   'plane': frame.plane_left, 'vis': frame.visible_in_right,
@@ -92,11 +94,11 @@ def _frame_arrays(seed: int, floor: str | None, cache: Path | None) -> dict[str,
 def _head_yaw(seed: int, floor: str | None, width: int, height: int) -> float:
     """Replay ``random_scene``'s draws up to the head pose and return its yaw in degrees."""
     rng = np.random.default_rng((int(seed), 4242))
-    setup = scene.random_setup(rng, width, height)
+    setup = random_setup(rng, width, height)
     if floor is None:
-        rng.integers(len(scene.FLOOR_KINDS))
-    rng.integers(len(scene.BACKGROUNDS))
-    scene.random_boxes(rng, setup, int(rng.integers(1, 6)))
+        rng.integers(len(FLOOR_KINDS))
+    rng.integers(len(BACKGROUNDS))
+    random_boxes(rng, setup, int(rng.integers(1, 6)))
     rng.uniform(0, 100)
     rng.uniform(0, 100)
     return float(rng.uniform(0, 360))
@@ -189,23 +191,23 @@ def real_hypotheses(data_dir: Path
                     ) -> Iterator[tuple[str, str, np.ndarray, np.ndarray, np.ndarray, float]]:
     """Yield ``(pair, kind, H, left, right, error_px)`` for KITTI and the chessboard pairs.
 
-    The reference planes are :func:`evaluate.kitti_reference` (the road, from the
+    The reference planes are :func:`kitti_reference` (the road, from the
     ground-truth disparity) and a homography fitted to the chessboard corners. Wrong planes
     are the reference shifted by 5 to 80 px and its inverse; ``swap_ok`` is the inverse on
     the swapped pair.
     """
     pairs = []
-    kitti = data_dir / evaluate.KITTI_DIR
+    kitti = data_dir / KITTI_DIR
     if kitti.exists():
-        ref = evaluate.kitti_reference(kitti)
-        pairs.append(('kitti_000046', evaluate.read_gray(kitti / 'left.png'),
-                      evaluate.read_gray(kitti / 'right.png'), ref.plane.homography()))
-    boards = data_dir / evaluate.OPENCV_DIR
+        ref = kitti_reference(kitti)
+        pairs.append(('kitti_000046', read_gray(kitti / 'left.png'),
+                      read_gray(kitti / 'right.png'), ref.plane.homography()))
+    boards = data_dir / OPENCV_DIR
     if boards.exists():
-        for number in evaluate.chessboard_pairs(boards):
-            left = evaluate.read_gray(boards / f'left{number}.jpg')
-            right = evaluate.read_gray(boards / f'right{number}.jpg')
-            found = evaluate.chessboard_corners(left, right)
+        for number in chessboard_pairs(boards):
+            left = read_gray(boards / f'left{number}.jpg')
+            right = read_gray(boards / f'right{number}.jpg')
+            found = chessboard_corners(left, right)
             if found is None:
                 continue
             hom = fit_homography(*found)
@@ -239,7 +241,7 @@ def separation_table(rows: dict[str, list]) -> str:
     header = ['kind', 'n', 'score min', 'median', 'max', 'accepted', 'swap flagged']
     order = [k for k in ('true', 'true_1px', 'swap_ok', 'shift5', 'shift10_20', 'shift40_80',
                          'period', 'cut', 'prior', 'inverse', 'swap_wrong') if k in rows]
-    return evaluate.markdown_table(header, [_row(k, rows[k]) for k in order])
+    return markdown_table(header, [_row(k, rows[k]) for k in order])
 
 
 def ranking_line(records: Sequence[tuple]) -> str:
@@ -260,7 +262,6 @@ def ranking_line(records: Sequence[tuple]) -> str:
 def timing(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
            config: verification.VerificationConfig, calls: int = 500) -> dict[str, float]:
     """Return median and p95 wall and thread-CPU milliseconds of ``verify_plane`` calls."""
-    cv2.setNumThreads(1)
     wall, cpu = [], []
     for _ in range(calls):
         start, start_cpu = time.perf_counter(), time.thread_time()
@@ -303,7 +304,7 @@ def _evaluate_rendered(seeds: Sequence[int], floor: str | None, cache: Path | No
                        ) -> dict[str, list]:
     rows: dict[str, list] = {}
     datas = {}
-    for seed in evaluate.progress(seeds, 'scenes'):
+    for seed in progress(seeds, 'scenes'):
         datas[seed] = _frame_arrays(seed, floor, cache)
     for index, seed in enumerate(seeds):
         data = datas[seed]
@@ -322,17 +323,21 @@ def _evaluate_rendered(seeds: Sequence[int], floor: str | None, cache: Path | No
 
 def main(argv: list[str] | None = None) -> int:
     """Run the evaluation and print the tables; see the module docstring."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__)
     parser.add_argument('--first-seed', type=int, default=0)
     parser.add_argument('--count', type=int, default=20)
     parser.add_argument('--floor', default=None, help='floor kind (default: random)')
-    parser.add_argument('--data', type=Path, default=evaluate.default_data_dir())
+    parser.add_argument('--data', type=Path, default=default_data_dir())
     parser.add_argument('--cache', type=Path, default=None,
                         help='folder to keep rendered scenes in (.npz)')
     parser.add_argument('--out', type=Path, default=Path('eval_output'))
     parser.add_argument('--no-real', action='store_true', help='skip the real pairs')
     args = parser.parse_args(argv)
-    cv2.setNumThreads(1)
+    with one_core():
+        return _run(args)
+
+
+def _run(args: argparse.Namespace) -> int:
     config = verification.VerificationConfig()
     print(f'machine: {machine_name()}')
     print(f'config: {config}')

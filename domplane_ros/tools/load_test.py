@@ -27,36 +27,26 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import Any
+from types import SimpleNamespace
+from typing import Any, Sequence
 
-from domplane_ros.core.homography import apply_homography
-from domplane_ros.sim.scene import scene_sequence
-from domplane_ros.tools.bench import machine_name
+from domplane_ros.sim.generators import scene_sequence
+from domplane_ros.sim.model import StereoFrame
+from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
+from domplane_ros.tools.common import (add_size_arguments, machine_name, ONE_THREAD_ENV,
+                                       prior_around, rss_mb, tool_parser)
 import numpy as np
 
-_THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1',
-               'OPENCV_FOR_THREADS_NUM': '1'}
 
-
-def rss_mb(pid: int) -> tuple[float, float]:
-    """Return ``(VmRSS, VmHWM)`` of a process in MB (current and peak resident memory)."""
-    values = {}
-    with open(f'/proc/{pid}/status', encoding='ascii') as stream:
-        for line in stream:
-            key, _, rest = line.partition(':')
-            if key in ('VmRSS', 'VmHWM'):
-                values[key] = int(rest.split()[0]) / 1024.0
-    return values.get('VmRSS', float('nan')), values.get('VmHWM', float('nan'))
-
-
-def _params_file(frame, directory: str, period_s: float, slop_s: float, depth: int) -> str:
-    s = frame.setup
+def _params_file(frame: StereoFrame, directory: str, period_s: float, slop_s: float,
+                 depth: int) -> str:
+    prior = prior_around(frame.setup)
     text = ('plane_node:\n  ros__parameters:\n'
-            f'    prior.focal_px: [{s.focal_px * 0.8}, {s.focal_px * 1.2}]\n'
-            f'    prior.baseline_over_height: [{s.baseline_over_height * 0.7}, '
-            f'{s.baseline_over_height * 1.3}]\n'
-            f'    prior.tilt_deg: [{s.tilt_deg - 8.0}, {s.tilt_deg + 8.0}]\n'
-            f'    prior.vergence_deg: [{s.vergence_deg - 2.0}, {s.vergence_deg + 2.0}]\n'
+            f'    prior.focal_px: [{prior.focal_px[0]}, {prior.focal_px[1]}]\n'
+            f'    prior.baseline_over_height: [{prior.baseline_over_height[0]}, '
+            f'{prior.baseline_over_height[1]}]\n'
+            f'    prior.tilt_deg: [{prior.tilt_deg[0]}, {prior.tilt_deg[1]}]\n'
+            f'    prior.vergence_deg: [{prior.vergence_deg[0]}, {prior.vergence_deg[1]}]\n'
             f'    diagnostics.period_s: {period_s}\n'
             # Stamps 10 ms apart at 100 Hz: a slop below half the period, so a frame whose
             # partner was lost is never paired with the next frame's partner.
@@ -67,10 +57,8 @@ def _params_file(frame, directory: str, period_s: float, slop_s: float, depth: i
     return str(path)
 
 
-def _transfer_error_px(h: np.ndarray, frame) -> float:
-    px = np.argwhere(frame.plane_left & frame.visible_in_right)[::7, ::-1].astype(float)
-    return float(np.linalg.norm(apply_homography(h, px)
-                                - apply_homography(frame.homography, px), axis=1).mean())
+def _transfer_error_px(h: np.ndarray, frame: StereoFrame) -> float:
+    return transfer_error_px(h, frame, every_floor_pixel(frame, 7))
 
 
 class _Window:
@@ -89,8 +77,8 @@ def _fmt_latency(values: list[float]) -> str:
             f'max {arr.max():6.1f}')
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run the load test and print its figures; return the exit code."""
+def _ros() -> SimpleNamespace:
+    """Import rclpy and the message types (only when the load test runs)."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -98,12 +86,13 @@ def run(args: argparse.Namespace) -> int:
     from sensor_msgs.msg import Image
     from std_msgs.msg import Float64MultiArray
 
-    print(f'machine: {machine_name()}')
-    print(f'rendering {args.frames} stereo pairs {args.width}x{args.height} ...', flush=True)
-    frames = scene_sequence(args.frames, seed=args.seed, width=args.width, height=args.height,
-                            floor='random', n_boxes=3, step=0.0, yaw_rate_deg=0.0,
-                            tilt_jitter_deg=0.0, vergence_jitter_deg=0.0)
-    order = list(range(len(frames)))
+    return SimpleNamespace(rclpy=rclpy, executor_cls=SingleThreadedExecutor,
+                           sensor_qos=qos_profile_sensor_data, diagnostic_cls=DiagnosticArray,
+                           image_cls=Image, array_cls=Float64MultiArray)
+
+
+def _dds_env(args: argparse.Namespace) -> dict[str, str]:
+    """Return the DDS variables shared by both processes: domain, loopback, Fast DDS profile."""
     domain_id = args.domain_id if args.domain_id is not None else random.randint(101, 200)
     dds = {'ROS_DOMAIN_ID': str(domain_id), 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}
     if args.fastdds_profile:
@@ -111,7 +100,30 @@ def run(args: argparse.Namespace) -> int:
         dds.update(FASTDDS_DEFAULT_PROFILES_FILE=profile, FASTRTPS_DEFAULT_PROFILES_FILE=profile)
     print('Fast DDS profile: ' + (dds.get('FASTDDS_DEFAULT_PROFILES_FILE')
                                   or os.environ.get('FASTDDS_DEFAULT_PROFILES_FILE', 'default')))
-    env = dict(os.environ, **dds, **_THREAD_ENV)
+    return dds
+
+
+def _stop(node_proc: subprocess.Popen) -> None:
+    """Stop the node process: Ctrl-C, then kill after 10 s."""
+    if node_proc.poll() is None:
+        node_proc.send_signal(signal.SIGINT)
+        try:
+            node_proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            node_proc.kill()
+            node_proc.wait()
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the load test and print its figures; return the exit code."""
+    ros = _ros()
+    print(f'machine: {machine_name()}')
+    print(f'rendering {args.frames} stereo pairs {args.width}x{args.height} ...', flush=True)
+    frames = scene_sequence(args.frames, seed=args.seed, width=args.width, height=args.height,
+                            floor='random', n_boxes=3, step=0.0, yaw_rate_deg=0.0,
+                            tilt_jitter_deg=0.0, vergence_jitter_deg=0.0)
+    dds = _dds_env(args)
+    env = dict(os.environ, **dds, **ONE_THREAD_ENV)
     os.environ.update(dds)
     with tempfile.TemporaryDirectory(prefix='domplane_load_') as tmp:
         params = _params_file(frames[0], tmp, args.diagnostics_period, 0.4 / args.rate,
@@ -120,149 +132,173 @@ def run(args: argparse.Namespace) -> int:
             [sys.executable, '-m', 'domplane_ros.ros.node', '--ros-args', '--params-file', params,
              '--log-level', 'warn'], env=env)
         try:
-            return _drive(args, frames, order, node_proc, rclpy, SingleThreadedExecutor,
-                          qos_profile_sensor_data, DiagnosticArray, Image, Float64MultiArray)
+            return _drive(args, frames, node_proc, ros)
         finally:
-            if node_proc.poll() is None:
-                node_proc.send_signal(signal.SIGINT)
-                try:
-                    node_proc.wait(timeout=10)
-                except subprocess.TimeoutExpired:
-                    node_proc.kill()
-                    node_proc.wait()
+            _stop(node_proc)
 
 
-def _drive(args: argparse.Namespace, frames: list, order: list[int],
-           node_proc: subprocess.Popen, rclpy: Any, executor_cls: Any, sensor_qos: Any,
-           diagnostic_cls: Any, image_cls: Any, array_cls: Any) -> int:
-    rclpy.init()
-    driver = rclpy.create_node('load_test_driver')
-    pubs = {side: driver.create_publisher(image_cls, f'{side}/image_raw', sensor_qos)
-            for side in ('left', 'right')}
-    messages = []
-    for frame in frames:
-        pair = {}
-        for side, gray in (('left', frame.left), ('right', frame.right)):
-            msg = image_cls()
-            msg.header.frame_id = f'{side}_cam'
-            msg.height, msg.width = gray.shape
-            msg.encoding = 'mono8'
-            msg.step = gray.shape[1]
-            msg.data = gray.tobytes()
-            pair[side] = msg
-        messages.append(pair)
+class _LoadDriver:
+    """The publishing side: a driver node, pre-built messages, and what comes back.
 
-    windows: list[_Window] = []
-    masks: list[tuple[int, bool]] = []          # (stamp, plane found) in arrival order
-    homographies: list[np.ndarray] = []
-    diagnostics: list[dict[str, str]] = []
-    rss: list[tuple[float, float, float]] = []  # (time, rss, peak)
+    It publishes the pairs with wall-clock stamps and records the masks (stamp, plane found,
+    latency per report window), the homographies (with their arrival time) and the node's
+    diagnostics (with theirs).
+    """
 
-    def on_mask(msg: Any) -> None:
+    def __init__(self, frames: Sequence[StereoFrame], ros: SimpleNamespace) -> None:
+        """Create the driver node, its publishers and subscriptions, and the messages."""
+        self.rclpy = ros.rclpy
+        self.rclpy.init()
+        self.node = self.rclpy.create_node('load_test_driver')
+        self.pubs = {side: self.node.create_publisher(ros.image_cls, f'{side}/image_raw',
+                                                      ros.sensor_qos)
+                     for side in ('left', 'right')}
+        self.messages = [{side: self._image(ros.image_cls, side, gray)
+                          for side, gray in (('left', f.left), ('right', f.right))}
+                         for f in frames]
+        self.windows: list[_Window] = []
+        self.masks: list[tuple[int, bool]] = []      # (stamp, plane found) in arrival order
+        self.homographies: list[np.ndarray] = []
+        self.h_times: list[float] = []
+        self.diagnostics: list[dict[str, str]] = []
+        self.clock0 = time.monotonic()               # start of the load, for arrival times
+        self.node.create_subscription(ros.image_cls, 'plane/mask', self._on_mask, 50)
+        self.node.create_subscription(ros.array_cls, 'plane/homography', self._on_homography,
+                                      50)
+        self.node.create_subscription(ros.diagnostic_cls, '/diagnostics', self._on_diag, 50)
+        self.executor = ros.executor_cls()
+        self.executor.add_node(self.node)
+
+    @staticmethod
+    def _image(image_cls: Any, side: str, gray: np.ndarray) -> Any:
+        msg = image_cls()
+        msg.header.frame_id = f'{side}_cam'
+        msg.height, msg.width = gray.shape
+        msg.encoding = 'mono8'
+        msg.step = gray.shape[1]
+        msg.data = gray.tobytes()
+        return msg
+
+    def _on_mask(self, msg: Any) -> None:
         stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
         latency = 1e-6 * (time.time_ns() - stamp)
-        if windows:
-            windows[-1].latency_ms.append(latency)
-        masks.append((stamp, bool(np.frombuffer(bytes(msg.data), np.uint8).any())))
+        if self.windows:
+            self.windows[-1].latency_ms.append(latency)
+        self.masks.append((stamp, bool(np.frombuffer(bytes(msg.data), np.uint8).any())))
 
-    clock0 = [time.monotonic()]         # start of the load, for arrival times
-    h_times: list[float] = []
-
-    def on_diag(msg: Any) -> None:
+    def _on_diag(self, msg: Any) -> None:
         status = msg.status[0]
         values = {kv.key: kv.value for kv in status.values}
         values['_message'] = status.message
         values['_level'] = str(status.level[0] if isinstance(status.level, bytes)
                                else int(status.level))
-        values['_t'] = f'{time.monotonic() - clock0[0]:.3f}'
-        diagnostics.append(values)
+        values['_t'] = f'{time.monotonic() - self.clock0:.3f}'
+        self.diagnostics.append(values)
 
-    def on_homography(msg: Any) -> None:
-        homographies.append(np.array(msg.data))
-        h_times.append(time.monotonic() - clock0[0])
+    def _on_homography(self, msg: Any) -> None:
+        self.homographies.append(np.array(msg.data))
+        self.h_times.append(time.monotonic() - self.clock0)
 
-    driver.create_subscription(image_cls, 'plane/mask', on_mask, 50)
-    driver.create_subscription(array_cls, 'plane/homography',
-                               on_homography, 50)
-    driver.create_subscription(diagnostic_cls, '/diagnostics', on_diag, 50)
-    executor = executor_cls()
-    executor.add_node(driver)
-    deadline = time.monotonic() + 30.0
-    while not (all(p.get_subscription_count() for p in pubs.values())
-               and driver.count_publishers('/diagnostics')):
-        if time.monotonic() > deadline or node_proc.poll() is not None:
-            print('plane_node did not come up', file=sys.stderr)
-            return 1
-        executor.spin_once(timeout_sec=0.05)
-    # Warm-up: a few pairs slowly, so the cold start is not counted as load.
-    t_warm = time.monotonic()
-    k = 0
-    while not homographies and time.monotonic() - t_warm < 20.0:
+    def spin_for(self, seconds: float, step_s: float, until: Any = None) -> None:
+        """Spin for ``seconds`` at most, or until ``until()`` is true."""
+        end = time.monotonic() + seconds
+        while time.monotonic() < end and not (until is not None and until()):
+            self.executor.spin_once(timeout_sec=step_s)
+
+    def wait_for_node(self, node_proc: subprocess.Popen, timeout_s: float = 30.0) -> bool:
+        """Return True once the node subscribes to both cameras and publishes diagnostics."""
+        deadline = time.monotonic() + timeout_s
+        while not (all(p.get_subscription_count() for p in self.pubs.values())
+                   and self.node.count_publishers('/diagnostics')):
+            if time.monotonic() > deadline or node_proc.poll() is not None:
+                return False
+            self.executor.spin_once(timeout_sec=0.05)
+        return True
+
+    def publish(self, index: int, sides: Sequence[str]) -> int:
+        """Publish pair ``index`` on ``sides`` with one wall-clock stamp; return the images."""
         stamp = time.time_ns()
-        for side in ('left', 'right'):
-            msg = messages[order[k % len(order)]][side]
+        for side in sides:
+            msg = self.messages[index][side]
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-            pubs[side].publish(msg)
-        end = time.monotonic() + 0.2
-        while time.monotonic() < end:
-            executor.spin_once(timeout_sec=0.01)
-    # Counters from a diagnostics message that covers every warm-up image.
-    n_diag = len(diagnostics)
-    end = time.monotonic() + 10.0
-    while len(diagnostics) < n_diag + 2 and time.monotonic() < end:
-        executor.spin_once(timeout_sec=0.05)
-    base = dict(diagnostics[-1]) if diagnostics else {}
-    masks.clear()
-    homographies.clear()
-    h_times.clear()
+            self.pubs[side].publish(msg)
+        return len(sides)
 
-    print(f'load: {args.rate:g} Hz on both cameras for {args.duration:g} s '
-          f'({args.width}x{args.height} mono8), plane_node pid {node_proc.pid}', flush=True)
+    def wait_for_diagnostics(self, count: int, timeout_s: float) -> None:
+        """Spin until ``count`` more diagnostics arrived (or ``timeout_s``)."""
+        target = len(self.diagnostics) + count
+        self.spin_for(timeout_s, 0.05, lambda: len(self.diagnostics) >= target)
+
+    def warm_up(self) -> dict[str, str]:
+        """Send pairs slowly until a homography comes; return the counters after warm-up."""
+        t_warm = time.monotonic()
+        while not self.homographies and time.monotonic() - t_warm < 20.0:
+            self.publish(0, ('left', 'right'))
+            self.spin_for(0.2, 0.01)
+        # Counters from a diagnostics message that covers every warm-up image.
+        self.wait_for_diagnostics(2, 10.0)
+        base = dict(self.diagnostics[-1]) if self.diagnostics else {}
+        self.masks.clear()
+        self.homographies.clear()
+        self.h_times.clear()
+        return base
+
+    def close(self) -> None:
+        """Destroy the driver node and shut rclpy down."""
+        self.executor.shutdown()
+        self.node.destroy_node()
+        self.rclpy.try_shutdown()
+
+
+def _load(args: argparse.Namespace, driver: _LoadDriver, node_proc: subprocess.Popen
+          ) -> tuple[int, int, list[tuple[float, float, float]]]:
+    """Publish at ``--rate`` for ``--duration``; return pairs, images sent and RSS samples."""
     period = 1.0 / args.rate
-    start = time.monotonic()
-    sent = 0
-    images_sent = 0
-    clock0[0] = start
+    start = driver.clock0 = time.monotonic()
+    sent = images_sent = 0
     next_window = start
-    rss.append((0.0, *rss_mb(node_proc.pid)))
-    rss_start = rss[0][1]
+    rss = [(0.0, *rss_mb(node_proc.pid))]     # (time, rss, peak)
     last_rss_t = start
     while True:
         now = time.monotonic()
         if now - start >= args.duration:
             break
         if now >= next_window:
-            windows.append(_Window())
+            driver.windows.append(_Window())
             next_window += args.window
-        index = order[sent % len(order)]
-        stamp = time.time_ns()
         silent = bool(args.dropout) and 0 <= now - start - args.dropout[0] < args.dropout[1]
-        for side in ('left',) if silent else ('left', 'right'):
-            msg = messages[index][side]
-            msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 1_000_000_000)
-            pubs[side].publish(msg)
-            images_sent += 1
+        images_sent += driver.publish(sent % len(driver.messages),
+                                      ('left',) if silent else ('left', 'right'))
         sent += 1
-        windows[-1].sent += 1
+        driver.windows[-1].sent += 1
         if now - last_rss_t >= 1.0:
             rss.append((now - start, *rss_mb(node_proc.pid)))
             last_rss_t = now
         next_time = start + sent * period
         while time.monotonic() < next_time:
-            executor.spin_once(timeout_sec=max(0.0, min(0.002, next_time - time.monotonic())))
-    t_end = time.monotonic()
+            driver.executor.spin_once(
+                timeout_sec=max(0.0, min(0.002, next_time - time.monotonic())))
     # Let the last pair and two diagnostics periods arrive.
-    n_diag = len(diagnostics)
-    while len(diagnostics) < n_diag + 2 and time.monotonic() - t_end < 10.0:
-        executor.spin_once(timeout_sec=0.05)
+    driver.wait_for_diagnostics(2, 10.0)
     rss.append((time.monotonic() - start, *rss_mb(node_proc.pid)))
-    executor.shutdown()
-    driver.destroy_node()
-    rclpy.try_shutdown()
-    code = _report(args, frames, sent, images_sent, windows, rss, rss_start, diagnostics, base,
-                   masks, homographies)
+    return sent, images_sent, rss
+
+
+def _drive(args: argparse.Namespace, frames: list[StereoFrame], node_proc: subprocess.Popen,
+           ros: SimpleNamespace) -> int:
+    driver = _LoadDriver(frames, ros)
+    if not driver.wait_for_node(node_proc):
+        print('plane_node did not come up', file=sys.stderr)
+        return 1
+    base = driver.warm_up()
+    print(f'load: {args.rate:g} Hz on both cameras for {args.duration:g} s '
+          f'({args.width}x{args.height} mono8), plane_node pid {node_proc.pid}', flush=True)
+    sent, images_sent, rss = _load(args, driver, node_proc)
+    driver.close()
+    code = _report(args, frames, sent, images_sent, driver.windows, rss, rss[0][1],
+                   driver.diagnostics, base, driver.masks, driver.homographies)
     if args.dropout:
-        _report_dropout(args, frames, diagnostics, homographies, h_times)
+        _report_dropout(args, frames, driver.diagnostics, driver.homographies, driver.h_times)
     return code
 
 
@@ -346,11 +382,10 @@ def _report(args, frames, sent, images_sent, windows, rss, rss_start, diagnostic
 
 def main(argv: list[str] | None = None) -> int:
     """Parse the arguments and run the load test."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__)
     parser.add_argument('--duration', type=float, default=60.0, help='seconds of load')
     parser.add_argument('--rate', type=float, default=100.0, help='pairs per second')
-    parser.add_argument('--width', type=int, default=1280)
-    parser.add_argument('--height', type=int, default=720)
+    add_size_arguments(parser, 1280, 720)
     parser.add_argument('--frames', type=int, default=8, help='pre-rendered pairs')
     parser.add_argument('--seed', type=int, default=11)
     parser.add_argument('--window', type=float, default=10.0, help='report window, seconds')

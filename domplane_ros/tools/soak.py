@@ -16,52 +16,24 @@ per-pair time and RSS over the run, and writes a plot. Run::
 from __future__ import annotations
 
 import argparse
+from dataclasses import dataclass, field
+import gc
 import os
+from pathlib import Path
+import sys
+import time
 
-for _name in ('OMP_NUM_THREADS', 'OPENBLAS_NUM_THREADS', 'MKL_NUM_THREADS'):
-    os.environ.setdefault(_name, '1')
-
-import gc  # noqa: E402,I100
-from pathlib import Path  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
-from types import SimpleNamespace  # noqa: E402
-
-import cv2  # noqa: E402
-from domplane_ros.config import PlaneNodeConfig, PriorConfig  # noqa: E402
-from domplane_ros.core.homography import apply_homography  # noqa: E402
-from domplane_ros.replay.cli import ReplaySession  # noqa: E402
-from domplane_ros.sim.scene import scene_sequence  # noqa: E402
-from domplane_ros.tools.bench import machine_name  # noqa: E402
-from domplane_ros.tools.load_test import rss_mb  # noqa: E402
-import numpy as np  # noqa: E402
+from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.replay.reader import ReplaySession
+from domplane_ros.sim.generators import scene_sequence
+from domplane_ros.sim.model import StereoFrame
+from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
+from domplane_ros.tools.common import (add_size_arguments, machine_name, mono8_message,
+                                       one_core, prior_around, progress, rss_mb, tool_parser)
+import numpy as np
 
 BAD_KINDS = ('bad_encoding', 'black', 'other_size', 'stamp_back', 'gap')
 PERIOD_NS = 33_333_333
-
-
-def _message(gray: np.ndarray, stamp_ns: int, encoding: str = 'mono8') -> SimpleNamespace:
-    header = SimpleNamespace(stamp=SimpleNamespace(sec=stamp_ns // 1_000_000_000,
-                                                   nanosec=stamp_ns % 1_000_000_000),
-                             frame_id='cam')
-    return SimpleNamespace(header=header, height=gray.shape[0], width=gray.shape[1],
-                           encoding=encoding, is_bigendian=0, step=gray.shape[1],
-                           data=gray.tobytes())
-
-
-def _prior_for(frame) -> PriorConfig:
-    s = frame.setup
-    return PriorConfig(focal_px=(s.focal_px * 0.8, s.focal_px * 1.2),
-                       baseline_over_height=(s.baseline_over_height * 0.7,
-                                             s.baseline_over_height * 1.3),
-                       tilt_deg=(s.tilt_deg - 8.0, s.tilt_deg + 8.0),
-                       vergence_deg=(s.vergence_deg - 2.0, s.vergence_deg + 2.0))
-
-
-def _transfer_error_px(h: np.ndarray, frame) -> float:
-    px = np.argwhere(frame.plane_left & frame.visible_in_right)[::7, ::-1].astype(float)
-    return float(np.linalg.norm(apply_homography(h, px)
-                                - apply_homography(frame.homography, px), axis=1).mean())
 
 
 def _slope_per_1000(values: np.ndarray, step: int = 100) -> float:
@@ -74,76 +46,105 @@ def _slope_per_1000(values: np.ndarray, step: int = 100) -> float:
     return float(np.polyfit(x, blocks, 1)[0] * 1000.0)
 
 
-def run(args: argparse.Namespace) -> int:
-    """Run the soak and print its figures."""
-    from tqdm import tqdm
+@dataclass
+class _Soak:
+    """What the soak measures, pair by pair."""
 
-    cv2.setNumThreads(1)
-    print(f'machine: {machine_name()}')
+    pairs: int
+    times_ms: np.ndarray = field(init=False)
+    cpu_ms: np.ndarray = field(init=False)   # thread CPU time: robust to a busy machine
+    rss: list = field(default_factory=list)     # (pair index, rss MB, peak MB)
+    errors: list = field(default_factory=list)  # transfer error of good pairs with a plane
+    outcomes: dict = field(default_factory=lambda: {'plane': 0, 'no plane': 0,
+                                                    'decode error': 0, 'not paired': 0})
+    bad_counts: dict = field(default_factory=lambda: dict.fromkeys(BAD_KINDS, 0))
+    start_rss: tuple | None = None
+
+    def __post_init__(self) -> None:
+        """Allocate the per-pair times."""
+        self.times_ms = np.full(self.pairs, np.nan)
+        self.cpu_ms = np.full(self.pairs, np.nan)
+
+
+def _render(args: argparse.Namespace) -> tuple[list[StereoFrame], StereoFrame]:
+    """Return the pre-rendered pairs and one pair of half the size."""
     print(f'rendering {args.frames} pairs {args.width}x{args.height} ...', flush=True)
     frames = scene_sequence(args.frames, seed=args.seed, width=args.width, height=args.height,
                             floor='random', n_boxes=3)
     small = scene_sequence(1, seed=args.seed + 1, width=args.width // 2,
                            height=args.height // 2, floor='random', n_boxes=3)[0]
-    order = list(range(len(frames))) + list(range(len(frames) - 2, 0, -1))
-    black = np.zeros_like(frames[0].left)
-    session = ReplaySession(PlaneNodeConfig(prior=_prior_for(frames[0])))
+    return frames, small
 
-    times_ms = np.full(args.pairs, np.nan)
-    cpu_ms = np.full(args.pairs, np.nan)       # thread CPU time: robust to a busy machine
-    rss = []             # (pair index, rss MB, peak MB)
-    errors = []          # transfer error of good pairs that found a plane
-    outcomes = {'plane': 0, 'no plane': 0, 'decode error': 0, 'not paired': 0}
-    bad_counts = dict.fromkeys(BAD_KINDS, 0)
+
+def _images(kind: str, frame: StereoFrame, small: StereoFrame, stamp: int
+            ) -> tuple[np.ndarray, np.ndarray, str, int]:
+    """Return ``(left, right, encoding, stamp)`` of a pair, spoilt as ``kind`` says."""
+    left, right, encoding = frame.left, frame.right, 'mono8'
+    if kind == 'bad_encoding':
+        encoding = 'yuv_bogus'
+    elif kind == 'black':
+        left = right = np.zeros_like(frame.left)
+    elif kind == 'other_size':
+        left, right = small.left, small.right
+    elif kind == 'stamp_back':
+        stamp -= 1_000_000_000
+    elif kind == 'gap':
+        stamp += 5_000_000_000
+    return left, right, encoding, stamp + PERIOD_NS
+
+
+def _feed(session: ReplaySession, soak: _Soak, k: int, kind: str, frame: StereoFrame,
+          images: tuple[np.ndarray, np.ndarray, str, int]) -> None:
+    """Feed one pair through the session and record its time and outcome."""
+    left, right, encoding, stamp = images
+    t0, c0 = time.perf_counter(), time.thread_time()
+    done = session.add('left', mono8_message(left, stamp, encoding))
+    done += session.add('right', mono8_message(right, stamp + 1000))
+    soak.times_ms[k] = 1e3 * (time.perf_counter() - t0)
+    soak.cpu_ms[k] = 1e3 * (time.thread_time() - c0)
+    if not done:
+        soak.outcomes['decode error' if kind == 'bad_encoding' else 'not paired'] += 1
+    for replayed in done:
+        result = replayed.result
+        soak.outcomes['plane' if result.ok else 'no plane'] += 1
+        if result.ok and not kind:
+            soak.errors.append(transfer_error_px(result.homography, frame,
+                                                 every_floor_pixel(frame, 7)))
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run the soak and print its figures."""
+    print(f'machine: {machine_name()}')
+    frames, small = _render(args)
+    order = list(range(len(frames))) + list(range(len(frames) - 2, 0, -1))
+    session = ReplaySession(PlaneNodeConfig(prior=prior_around(frames[0].setup)))
+    soak = _Soak(args.pairs)
     stamp = 1_700_000_000_000_000_000
     gc.collect()
-    start_rss = None
-    bar = tqdm(range(args.pairs), unit='pair', desc='soak', file=sys.stderr,
-               disable=args.no_progress, mininterval=1.0)
+    bar = progress(range(args.pairs), 'soak', unit='pair', disable=args.no_progress,
+                   mininterval=1.0, leave=True)
     for k in bar:
         kind = ''
         if args.bad_every and k % args.bad_every == args.bad_every - 1:
             kind = BAD_KINDS[(k // args.bad_every) % len(BAD_KINDS)]
-            bad_counts[kind] += 1
+            soak.bad_counts[kind] += 1
         frame = frames[order[k % len(order)]]
-        left, right, encoding = frame.left, frame.right, 'mono8'
-        if kind == 'bad_encoding':
-            encoding = 'yuv_bogus'
-        elif kind == 'black':
-            left = right = black
-        elif kind == 'other_size':
-            left, right = small.left, small.right
-        elif kind == 'stamp_back':
-            stamp -= 1_000_000_000
-        elif kind == 'gap':
-            stamp += 5_000_000_000
-        stamp += PERIOD_NS
-        t0, c0 = time.perf_counter(), time.thread_time()
-        done = session.add('left', _message(left, stamp, encoding))
-        done += session.add('right', _message(right, stamp + 1000))
-        times_ms[k] = 1e3 * (time.perf_counter() - t0)
-        cpu_ms[k] = 1e3 * (time.thread_time() - c0)
-        if not done:
-            key = 'decode error' if kind == 'bad_encoding' else 'not paired'
-            outcomes[key] += 1
-        for replayed in done:
-            result = replayed.result
-            outcomes['plane' if result.ok else 'no plane'] += 1
-            if result.ok and not kind:
-                errors.append(_transfer_error_px(result.homography, frame))
+        images = _images(kind, frame, small, stamp)
+        stamp = images[3]
+        _feed(session, soak, k, kind, frame, images)
         if k == 99:
             gc.collect()
-            start_rss = (k, *rss_mb(os.getpid()))
-            rss.append(start_rss)
+            soak.start_rss = (k, *rss_mb(os.getpid()))
+            soak.rss.append(soak.start_rss)
         elif k % 250 == 249:
-            rss.append((k, *rss_mb(os.getpid())))
-        if k % 500 == 499:
-            bar.set_postfix_str(f'RSS {rss[-1][1]:.0f} MB', refresh=False)
-    bar.close()
+            soak.rss.append((k, *rss_mb(os.getpid())))
+        if k % 500 == 499 and hasattr(bar, 'set_postfix_str'):
+            bar.set_postfix_str(f'RSS {soak.rss[-1][1]:.0f} MB', refresh=False)
+    if hasattr(bar, 'close'):
+        bar.close()
     gc.collect()
-    rss.append((args.pairs - 1, *rss_mb(os.getpid())))
-    return _report(args, times_ms, cpu_ms, rss, start_rss, errors, outcomes, bad_counts,
-                   session)
+    soak.rss.append((args.pairs - 1, *rss_mb(os.getpid())))
+    return _report(args, soak, session)
 
 
 def _time_line(name: str, values: np.ndarray) -> str:
@@ -155,8 +156,9 @@ def _time_line(name: str, values: np.ndarray) -> str:
             '1000 pairs')
 
 
-def _report(args, times_ms, cpu_ms, rss, start_rss, errors, outcomes, bad_counts,
-            session) -> int:
+def _report(args: argparse.Namespace, soak: _Soak, session: ReplaySession) -> int:
+    times_ms, cpu_ms, errors = soak.times_ms, soak.cpu_ms, soak.errors
+    rss, start_rss, outcomes, bad_counts = soak.rss, soak.start_rss, soak.outcomes, soak.bad_counts
     n = len(times_ms)
     rss_arr = np.array(rss)
     rss_slope = (float(np.polyfit(rss_arr[:, 0], rss_arr[:, 1], 1)[0] * 1000.0)
@@ -216,17 +218,18 @@ def _plot(out: Path, times_ms: np.ndarray, cpu_ms: np.ndarray, rss_arr: np.ndarr
 
 def main(argv: list[str] | None = None) -> int:
     """Parse the arguments and run the soak."""
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser = tool_parser(__doc__)
     parser.add_argument('--pairs', type=int, default=10_000)
     parser.add_argument('--frames', type=int, default=12, help='pre-rendered pairs')
-    parser.add_argument('--width', type=int, default=640)
-    parser.add_argument('--height', type=int, default=480)
+    add_size_arguments(parser)
     parser.add_argument('--seed', type=int, default=5)
     parser.add_argument('--bad-every', type=int, default=97,
                         help='one bad frame every this many pairs (0: none)')
     parser.add_argument('--output', default='soak_output', help='folder for soak.png')
     parser.add_argument('--no-progress', action='store_true')
-    return run(parser.parse_args(argv))
+    args = parser.parse_args(argv)
+    with one_core():
+        return run(args)
 
 
 if __name__ == '__main__':

@@ -1,4 +1,4 @@
-"""The evaluation script on the real pairs in test/data (no the shared data folder needed).
+"""The evaluation tool and its library on the real pairs in test/data (no shared data needed).
 
 The bounds below are the measured figures with a margin, not the targets: where the product
 meets a target the test pins what it measures, and where it misses one (chessboards) the
@@ -15,22 +15,23 @@ from pathlib import Path
 import cv2
 from domplane_ros.core.homography import apply_homography, fit_homography
 from domplane_ros.tools import evaluate
+from domplane_ros.tools.evaluation import datasets, methods, references, tables
 import numpy as np
 import pytest
 
 DATA = Path(__file__).resolve().parents[1] / 'data'
-KITTI = DATA / evaluate.KITTI_DIR
-OPENCV = DATA / evaluate.OPENCV_DIR
+KITTI = DATA / references.KITTI_DIR
+OPENCV = DATA / references.OPENCV_DIR
 
 
 @pytest.fixture(scope='module')
-def kitti_reference() -> evaluate.KittiReference:
-    return evaluate.kitti_reference(KITTI)
+def kitti_reference() -> references.KittiReference:
+    return references.kitti_reference(KITTI)
 
 
 @pytest.fixture(scope='module')
-def kitti_cases() -> list[evaluate.Case]:
-    return evaluate.evaluate_kitti(KITTI, repeats=1, full_image=False)
+def kitti_cases() -> list[datasets.Case]:
+    return datasets.evaluate_kitti(KITTI, repeats=1, full_image=False)
 
 
 def test_test_data_is_small_and_licensed():
@@ -57,7 +58,7 @@ def test_kitti_reference_reproduces_the_shared_readme(kitti_reference):
 
 
 def test_disparity_plane_homography_shifts_by_the_disparity():
-    plane = evaluate.DisparityPlane(a=0.002, b=0.3, c=-50.0, inlier_fraction=1.0)
+    plane = references.DisparityPlane(a=0.002, b=0.3, c=-50.0, inlier_fraction=1.0)
     points = np.array([[10.0, 200.0], [600.0, 300.0]])
     disparity = 0.002 * points[:, 0] + 0.3 * points[:, 1] - 50.0
     mapped = apply_homography(plane.homography(), points)
@@ -72,25 +73,25 @@ def test_disparity_plane_fit_recovers_an_exact_plane_with_outliers():
     outliers = rng.random(disparity.shape) < 0.3
     disparity[outliers] += rng.uniform(5, 30, np.count_nonzero(outliers))
     disparity[rng.random(disparity.shape) < 0.5] = np.nan
-    plane = evaluate.fit_disparity_plane(disparity, iterations=200)
+    plane = references.fit_disparity_plane(disparity, iterations=200)
     assert (plane.a, plane.b, plane.c) == pytest.approx((0.01, 0.2, 5.0), abs=1e-9)
     with pytest.raises(ValueError, match='at least 3'):
-        evaluate.fit_disparity_plane(np.full((4, 4), np.nan))
+        references.fit_disparity_plane(np.full((4, 4), np.nan))
 
 
 @pytest.mark.parametrize('number, floor_px', [('01', 0.55), ('02', 1.32)])
 def test_chessboard_reference_fits_its_corners(number, floor_px):
     left = cv2.imread(str(OPENCV / f'left{number}.jpg'), cv2.IMREAD_GRAYSCALE)
     right = cv2.imread(str(OPENCV / f'right{number}.jpg'), cv2.IMREAD_GRAYSCALE)
-    corners = evaluate.chessboard_corners(left, right)
+    corners = references.chessboard_corners(left, right)
     assert corners is not None
     src, dst = corners
     assert src.shape == dst.shape == (54, 2)
     reference = fit_homography(src, dst)
-    error = evaluate.mean_transfer_px(reference, src, dst)
+    error = references.mean_transfer_px(reference, src, dst)
     # Lens distortion: a homography fits the corners to about 0.5-1.7 px only.
     assert error == pytest.approx(floor_px, abs=0.05)
-    assert error < evaluate.CHESSBOARD_TARGET_PX
+    assert error < datasets.CHESSBOARD_TARGET_PX
 
 
 def test_product_on_kitti_meets_the_road_target(kitti_cases):
@@ -99,7 +100,7 @@ def test_product_on_kitti_meets_the_road_target(kitti_cases):
     assert ours['ok'] == 1.0
     # Measured 0.46 px (target 1.5 px); the warm start keeps it.
     assert ours['error_px'] < 0.7
-    assert ours['error_px'] < evaluate.KITTI_TARGET_PX
+    assert ours['error_px'] < datasets.KITTI_TARGET_PX
     assert ours['warm_error_px'] < 0.7
     # Measured: road IoU 0.79, off-road recall 0.79, 174 inliers of 324 corners.
     assert ours['road_iou'] > 0.7
@@ -122,7 +123,7 @@ def test_orb_magsac_baseline_on_kitti(kitti_cases):
 
 def test_orb_magsac_without_features_fails_as_a_value():
     flat = np.full((120, 160), 128, np.uint8)
-    run = evaluate.run_orb_magsac(flat, flat, repeats=1)
+    run = methods.run_orb_magsac(flat, flat, repeats=1)
     assert not run.ok
     assert run.n_inliers == 0
     assert 'no homography' in run.reason
@@ -132,13 +133,13 @@ def test_orb_magsac_without_features_fails_as_a_value():
                    'vertical offset between the unrectified cameras) gets no closer than '
                    '~12 px to the board, and the cold start locks onto another solution')
 def test_product_on_chessboards_meets_the_board_target():
-    cases = evaluate.evaluate_chessboards(OPENCV, repeats=1)
+    cases = datasets.evaluate_chessboards(OPENCV, repeats=1)
     assert [c.pair for c in cases] == ['01', '02']
-    assert all(c.figures['ours']['error_px'] < evaluate.CHESSBOARD_TARGET_PX for c in cases)
+    assert all(c.figures['ours']['error_px'] < datasets.CHESSBOARD_TARGET_PX for c in cases)
 
 
 def test_markdown_table_marks_failures_and_missing_values():
-    table = evaluate.markdown_table(['a', 'b', 'c'], [[1.234, math.inf, math.nan]])
+    table = tables.markdown_table(['a', 'b', 'c'], [[1.234, math.inf, math.nan]])
     assert table.splitlines()[2] == '| 1.23 | fail | - |'
 
 

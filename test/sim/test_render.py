@@ -1,20 +1,22 @@
-"""Tests of the stereo scene renderer and its ground truth."""
+"""Tests of the ray caster, its ground truth and the scene model's checks."""
 
 from __future__ import annotations
 
 import cv2
 from domplane_ros.core import prior
-from domplane_ros.sim import scene
+from domplane_ros.sim.model import BACKGROUNDS, Box, CameraSetup, StereoFrame
+from domplane_ros.sim.render import render_stereo
+from domplane_ros.sim.textures import FLOOR_KINDS
 import numpy as np
 import pytest
 
-SETUP = scene.CameraSetup(focal_px=320.0, baseline_over_height=0.2, tilt_deg=30.0,
-                          vergence_deg=1.0, width=320, height=240)
-BOXES = (scene.Box(x=0.2, z=2.5, width=0.5, depth=0.4, height=0.5, yaw_deg=20.0),
-         scene.Box(x=-1.0, z=4.5, width=0.8, depth=0.7, height=0.8, yaw_deg=-10.0))
+SETUP = CameraSetup(focal_px=320.0, baseline_over_height=0.2, tilt_deg=30.0,
+                    vergence_deg=1.0, width=320, height=240)
+BOXES = (Box(x=0.2, z=2.5, width=0.5, depth=0.4, height=0.5, yaw_deg=20.0),
+         Box(x=-1.0, z=4.5, width=0.8, depth=0.7, height=0.8, yaw_deg=-10.0))
 
 
-def _warp_right_to_left(frame: scene.StereoFrame) -> np.ndarray:
+def _warp_right_to_left(frame: StereoFrame) -> np.ndarray:
     """Warp the right image into the left view with the true floor homography."""
     height, width = frame.left.shape
     return cv2.warpPerspective(frame.right, frame.homography, (width, height),
@@ -33,21 +35,21 @@ def _erode(mask: np.ndarray, px: int) -> np.ndarray:
 
 
 def test_homography_is_the_prior_model():
-    for setup in (SETUP, scene.CameraSetup(850.0, 0.05, 12.0, -2.0, 640, 480)):
+    for setup in (SETUP, CameraSetup(850.0, 0.05, 12.0, -2.0, 640, 480)):
         np.testing.assert_allclose(
             setup.homography(),
             prior.plane_homography(setup.focal_px, setup.baseline_over_height, setup.tilt_deg,
                                    setup.vergence_deg, setup.width, setup.height))
-    frame = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
+    frame = render_stereo(SETUP, BOXES, noise_std=0.0)
     np.testing.assert_allclose(frame.homography, SETUP.homography())
 
 
-@pytest.mark.parametrize('floor', scene.FLOOR_KINDS)
-@pytest.mark.parametrize('background', scene.BACKGROUNDS)
+@pytest.mark.parametrize('floor', FLOOR_KINDS)
+@pytest.mark.parametrize('background', BACKGROUNDS)
 def test_floor_matches_after_warp_and_boxes_do_not(floor, background):
     # The wall is close enough to be seen above the far floor.
-    frame = scene.render_stereo(SETUP, BOXES, floor=floor, noise_std=0.0, seed=3,
-                                background=background, wall_distance=5.0)
+    frame = render_stereo(SETUP, BOXES, floor=floor, noise_std=0.0, seed=3,
+                          background=background, wall_distance=5.0)
     if background == 'wall':
         assert np.mean(~frame.plane_left & ~frame.obstacle_left) > 0.02
     warped = _warp_right_to_left(frame).astype(np.float64)
@@ -69,7 +71,7 @@ def test_floor_matches_after_warp_and_boxes_do_not(floor, background):
 
 
 def test_ground_truth_masks_are_consistent():
-    frame = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
+    frame = render_stereo(SETUP, BOXES, noise_std=0.0)
     assert frame.left.shape == frame.right.shape == (SETUP.height, SETUP.width)
     assert frame.left.dtype == frame.right.dtype == np.uint8
     for mask in (frame.plane_left, frame.visible_in_right, frame.obstacle_left):
@@ -89,9 +91,9 @@ def test_ground_truth_masks_are_consistent():
 
 
 def test_occluded_floor_does_not_match():
-    setup = scene.CameraSetup(320.0, 0.4, 30.0, 0.0, 320, 240)
-    boxes = (scene.Box(x=0.0, z=2.2, width=0.5, depth=0.5, height=0.7),)
-    frame = scene.render_stereo(setup, boxes, floor='random', noise_std=0.0)
+    setup = CameraSetup(320.0, 0.4, 30.0, 0.0, 320, 240)
+    boxes = (Box(x=0.0, z=2.2, width=0.5, depth=0.5, height=0.7),)
+    frame = render_stereo(setup, boxes, floor='random', noise_std=0.0)
     ys, xs = np.nonzero(frame.plane_left)
     mapped = frame.homography @ np.stack([xs, ys, np.ones_like(xs)])
     rx, ry = mapped[0] / mapped[2], mapped[1] / mapped[2]
@@ -106,24 +108,24 @@ def test_occluded_floor_does_not_match():
 
 
 def test_gain_and_offset_apply_to_the_right_camera():
-    plain = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
-    shifted = scene.render_stereo(SETUP, BOXES, noise_std=0.0, gain=1.2, offset=-15.0)
+    plain = render_stereo(SETUP, BOXES, noise_std=0.0)
+    shifted = render_stereo(SETUP, BOXES, noise_std=0.0, gain=1.2, offset=-15.0)
     np.testing.assert_array_equal(plain.left, shifted.left)
     expected = np.clip(np.rint(1.2 * plain.right.astype(np.float64) - 15.0), 0, 255)
     assert np.abs(shifted.right - expected).max() <= 2.0
 
 
 def test_noise_has_the_requested_std():
-    clean = scene.render_stereo(SETUP, BOXES, noise_std=0.0)
-    noisy = scene.render_stereo(SETUP, BOXES, noise_std=3.0)
+    clean = render_stereo(SETUP, BOXES, noise_std=0.0)
+    noisy = render_stereo(SETUP, BOXES, noise_std=3.0)
     residual = noisy.left.astype(np.float64) - clean.left
     assert 2.6 < residual.std() < 3.4
     assert abs(residual.mean()) < 0.2
 
 
 def test_blur_smooths_the_images():
-    sharp = scene.render_stereo(SETUP, BOXES, noise_std=0.0, blur_sigma=0.0)
-    blurred = scene.render_stereo(SETUP, BOXES, noise_std=0.0, blur_sigma=1.5)
+    sharp = render_stereo(SETUP, BOXES, noise_std=0.0, blur_sigma=0.0)
+    blurred = render_stereo(SETUP, BOXES, noise_std=0.0, blur_sigma=1.5)
 
     def gradient_energy(image: np.ndarray) -> float:
         return float(np.abs(np.diff(image.astype(np.float64), axis=1)).mean())
@@ -131,55 +133,14 @@ def test_blur_smooths_the_images():
     assert gradient_energy(blurred.left) < 0.8 * gradient_energy(sharp.left)
 
 
-def test_render_is_deterministic_by_seed():
-    a = scene.random_scene(5, width=320, height=240)
-    b = scene.random_scene(5, width=320, height=240)
-    c = scene.random_scene(6, width=320, height=240)
-    np.testing.assert_array_equal(a.left, b.left)
-    np.testing.assert_array_equal(a.right, b.right)
-    np.testing.assert_array_equal(a.plane_left, b.plane_left)
-    assert a.setup == b.setup and a.boxes == b.boxes
-    assert not np.array_equal(a.left, c.left)
-
-
-def test_random_scenes_are_within_the_prior_ranges():
-    for seed in range(6):
-        frame = scene.random_scene(seed, width=320, height=240)
-        setup = frame.setup
-        for name, (low, high) in scene.SETUP_RANGES.items():
-            assert low <= getattr(setup, name) <= high
-        assert 1 <= len(frame.boxes) <= 5
-        assert frame.obstacle_left.any()
-        assert frame.plane_left.mean() > 0.2
-        # The floor is the dominant surface.
-        assert frame.obstacle_left.sum() < frame.plane_left.sum()
-
-
-def test_sequence_moves_the_head_and_keeps_the_model():
-    frames = scene.scene_sequence(4, seed=2, width=160, height=120, step=0.1)
-    assert len(frames) == 4
-    for frame in frames:
-        np.testing.assert_allclose(frame.homography, frame.setup.homography())
-    # The texture moves under the head from frame to frame.
-    assert not np.array_equal(frames[0].left, frames[1].left)
-    assert frames[0].head_pose != frames[1].head_pose
-    # Boxes are fixed in the world, so they come closer as the head walks forward.
-    if frames[0].boxes:
-        assert frames[-1].boxes[0].z < frames[0].boxes[0].z
-    # Tilt and vergence wobble, so the homography changes.
-    assert not np.allclose(frames[0].homography, frames[-1].homography)
-
-
 def test_bad_arguments_raise_value_error():
     with pytest.raises(ValueError, match='floor'):
-        scene.render_stereo(SETUP, floor='carpet')
+        render_stereo(SETUP, floor='carpet')
     with pytest.raises(ValueError, match='background'):
-        scene.render_stereo(SETUP, background='sea')
+        render_stereo(SETUP, background='sea')
     with pytest.raises(ValueError, match='positive'):
-        scene.Box(0.0, 2.0, -1.0, 1.0, 1.0)
+        Box(0.0, 2.0, -1.0, 1.0, 1.0)
     with pytest.raises(ValueError, match='focal_px'):
-        scene.CameraSetup(0.0, 0.1, 20.0, 0.0)
+        CameraSetup(0.0, 0.1, 20.0, 0.0)
     with pytest.raises(ValueError, match='finite'):
-        scene.CameraSetup(500.0, float('nan'), 20.0, 0.0)
-    with pytest.raises(ValueError, match='n_frames'):
-        scene.scene_sequence(0, seed=0)
+        CameraSetup(500.0, float('nan'), 20.0, 0.0)

@@ -1,0 +1,247 @@
+"""Random rendered scenes and sequences with ground truth, drawn within the default prior.
+
+:func:`random_scene` draws one stereo pair (set-up, floor kind, boxes in view, background);
+:func:`scene_sequence` renders a head walking over the floor past fixed boxes. The same seed
+gives the same frames.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Iterator, Sequence
+
+from domplane_ros.sim.model import (BACKGROUNDS, Box, CameraSetup, footprint_radius, HeadPose,
+                                    level_boxes, level_from_left, overlaps_any, StereoFrame)
+from domplane_ros.sim.render import BOX, FLOOR, left_labels, render_stereo
+from domplane_ros.sim.textures import FLOOR_KINDS
+import numpy as np
+
+SETUP_RANGES = {
+    'focal_px': (400.0, 900.0),
+    'baseline_over_height': (0.05, 0.4),
+    'tilt_deg': (10.0, 50.0),
+    'vergence_deg': (-2.0, 4.0),
+}
+
+
+def random_setup(rng: np.random.Generator, width: int = 640, height: int = 480) -> CameraSetup:
+    """Draw a camera set-up uniformly within :data:`SETUP_RANGES` (the default prior)."""
+    return CameraSetup(**{name: float(rng.uniform(lo, hi))
+                          for name, (lo, hi) in SETUP_RANGES.items()},
+                       width=width, height=height)
+
+
+def _obstacle_fraction(setup: CameraSetup, boxes: Sequence[Box]) -> tuple[float, float]:
+    """Return (obstacle / (floor + obstacle) pixels, floor fraction) from a coarse render."""
+    factor = max(1, setup.width // 80)
+    small = CameraSetup(setup.focal_px / factor, setup.baseline_over_height, setup.tilt_deg,
+                        setup.vergence_deg, max(8, setup.width // factor),
+                        max(8, setup.height // factor))
+    label = left_labels(small, boxes)
+    floor = np.count_nonzero(label == FLOOR)
+    obstacle = np.count_nonzero(label == BOX)
+    return obstacle / max(1, floor + obstacle), floor / label.size
+
+
+def random_boxes(rng: np.random.Generator, setup: CameraSetup, count: int,
+                 max_obstacle_fraction: float = 0.25, max_distance: float = 9.0
+                 ) -> list[Box]:
+    """Place up to ``count`` non-overlapping boxes on floor points seen by the left camera.
+
+    Boxes whose addition makes the obstacles cover more than ``max_obstacle_fraction`` of the
+    floor-or-obstacle pixels are dropped, so the floor stays the dominant plane.
+
+    Args:
+        rng: Random generator.
+        setup: The stereo head.
+        count: Number of boxes wanted.
+        max_obstacle_fraction: Largest obstacle share of floor-or-obstacle pixels.
+        max_distance: Farthest box centre from the head.
+
+    Returns:
+        The boxes in the level frame (at least one if the floor is visible at all).
+
+    """
+    r_lc = level_from_left(setup.tilt_deg)
+    k_inv = np.linalg.inv(setup.intrinsics())
+    boxes: list[Box] = []
+    for _ in range(40 * max(1, count)):
+        if len(boxes) >= count:
+            break
+        px = rng.uniform(0.08, 0.92) * (setup.width - 1)
+        py = rng.uniform(0.3, 0.97) * (setup.height - 1)
+        ray = r_lc @ (k_inv @ np.array([px, py, 1.0]))
+        if ray[1] <= 1e-3:
+            continue
+        point = ray / ray[1]
+        if not 1.2 < point[2] < max_distance:
+            continue
+        size = float(np.clip(0.15 * point[2], 0.3, 1.0))
+        box = Box(x=float(point[0]), z=float(point[2]),
+                  width=float(rng.uniform(0.6, 1.3) * size),
+                  depth=float(rng.uniform(0.6, 1.3) * size),
+                  height=float(rng.uniform(0.25, 0.9)), yaw_deg=float(rng.uniform(-40, 40)))
+        if box.z - footprint_radius(box) < 0.8 or overlaps_any(box, boxes):
+            continue
+        fraction, _ = _obstacle_fraction(setup, boxes + [box])
+        if fraction > max_obstacle_fraction:
+            continue
+        boxes.append(box)
+    return boxes
+
+
+def random_scene(seed: int, width: int = 640, height: int = 480, floor: str | None = None,
+                 n_boxes: int | tuple[int, int] = (1, 5), gain: float | None = 1.0,
+                 offset: float | None = 0.0, noise_std: float = 1.0,
+                 background: str | None = None, setup: CameraSetup | None = None,
+                 blur_sigma: float = 0.5) -> StereoFrame:
+    """Render a random scene: set-up within :data:`SETUP_RANGES`, 1-5 boxes in view.
+
+    Args:
+        seed: Seed of every random choice; the same seed gives the same frame.
+        width: Image width in pixels.
+        height: Image height in pixels.
+        floor: Floor kind (one of :data:`ALL_FLOOR_KINDS`), or None for a random one of
+            :data:`FLOOR_KINDS`.
+        n_boxes: Number of boxes, or an inclusive ``(min, max)`` range to draw from.
+        gain: Right camera gain, or None to draw one in [0.8, 1.25].
+        offset: Right camera offset in grey levels, or None to draw one in [-20, 20].
+        noise_std: Pixel noise standard deviation in grey levels.
+        background: ``'horizon'``, ``'wall'`` or None for a random one.
+        setup: A fixed camera set-up instead of a random one.
+        blur_sigma: Gaussian blur of both images in pixels.
+
+    Returns:
+        The rendered :class:`StereoFrame`.
+
+    """
+    rng = np.random.default_rng((int(seed), 4242))
+    setup = setup or random_setup(rng, width, height)
+    floor = floor or FLOOR_KINDS[int(rng.integers(len(FLOOR_KINDS)))]
+    background = background or BACKGROUNDS[int(rng.integers(len(BACKGROUNDS)))]
+    if isinstance(n_boxes, tuple):
+        n_boxes = int(rng.integers(n_boxes[0], n_boxes[1] + 1))
+    boxes = random_boxes(rng, setup, n_boxes)
+    pose = HeadPose(float(rng.uniform(0, 100)), float(rng.uniform(0, 100)),
+                    float(rng.uniform(0, 360)))
+    gain = float(rng.uniform(0.8, 1.25)) if gain is None else gain
+    offset = float(rng.uniform(-20, 20)) if offset is None else offset
+    return render_stereo(setup, boxes, floor=floor, seed=int(seed), gain=gain, offset=offset,
+                         noise_std=noise_std, head_pose=pose, background=background,
+                         wall_distance=float(rng.uniform(8, 20)), blur_sigma=blur_sigma)
+
+
+def scene_sequence(n_frames: int, seed: int, width: int = 640, height: int = 480,
+                   floor: str | None = None, n_boxes: int = 3, step: float = 0.04,
+                   yaw_rate_deg: float = 0.6, tilt_jitter_deg: float = 1.0,
+                   vergence_jitter_deg: float = 0.3, gain: float = 1.0, offset: float = 0.0,
+                   noise_std: float = 1.0, background: str = 'horizon',
+                   setup: CameraSetup | None = None, blur_sigma: float = 0.5
+                   ) -> list[StereoFrame]:
+    """Render a short sequence of a head walking over the floor past fixed boxes.
+
+    The head moves ``step`` per frame along its heading, which turns slowly (a sine of
+    amplitude ``yaw_rate_deg * n_frames / 4`` degrees); tilt and vergence wobble smoothly by up
+    to the given jitter, so the true homography changes from frame to frame only through them.
+    Boxes are fixed in the world and move through the level frame.
+
+    Args:
+        n_frames: Number of frames (>= 1).
+        seed: Seed of every random choice.
+        width: Image width in pixels.
+        height: Image height in pixels.
+        floor: Floor kind, or None for a random one.
+        n_boxes: Number of boxes placed ahead of the start pose.
+        step: Forward motion per frame (camera height = 1).
+        yaw_rate_deg: Scale of the heading change per frame, degrees.
+        tilt_jitter_deg: Amplitude of the tilt wobble, degrees.
+        vergence_jitter_deg: Amplitude of the vergence wobble, degrees.
+        gain: Right camera gain.
+        offset: Right camera offset in grey levels.
+        noise_std: Pixel noise standard deviation in grey levels.
+        background: ``'horizon'`` or ``'wall'``.
+        setup: The nominal set-up (default: a random one).
+        blur_sigma: Gaussian blur of both images in pixels.
+
+    Returns:
+        ``n_frames`` :class:`StereoFrame` values.
+
+    Raises:
+        ValueError: If ``n_frames < 1``.
+
+    """
+    if n_frames < 1:
+        raise ValueError(f'n_frames must be >= 1, got {n_frames}')
+    rng = np.random.default_rng((int(seed), 777))
+    nominal = _inside_prior(setup or random_setup(rng, width, height), tilt_jitter_deg,
+                            vergence_jitter_deg)
+    floor = floor or FLOOR_KINDS[int(rng.integers(len(FLOOR_KINDS)))]
+    world_boxes = _boxes_ahead(rng, nominal, n_boxes, step * n_frames)
+    origin = np.array([rng.uniform(0, 100), rng.uniform(0, 100)])
+    heading0 = float(rng.uniform(0, 360))
+    phases = rng.uniform(0, 2 * np.pi, 3)
+    frames = []
+    for i, (x, z, yaw) in enumerate(_walk(n_frames, step, yaw_rate_deg, phases[2])):
+        wobble = (tilt_jitter_deg * math.sin(_phase(i, n_frames) + phases[0]),
+                  vergence_jitter_deg * math.sin(_phase(i, n_frames) + phases[1]))
+        frames.append(render_stereo(
+            _wobbled(nominal, *wobble), level_boxes(world_boxes, x, z, yaw), floor=floor,
+            seed=int(seed), gain=gain, offset=offset, noise_std=noise_std,
+            head_pose=_texture_pose(origin, heading0, x, z, yaw), background=background,
+            blur_sigma=blur_sigma, noise_seed=int(seed) * 100003 + i))
+    return frames
+
+
+def _phase(index: int, n_frames: int) -> float:
+    """Return the phase of the wobble and of the turn at a frame, radians."""
+    return 2 * np.pi * index / max(n_frames, 8)
+
+
+def _wobbled(nominal: CameraSetup, tilt_offset_deg: float,
+             vergence_offset_deg: float) -> CameraSetup:
+    """Return ``nominal`` with its tilt and vergence moved by the given offsets."""
+    return CameraSetup(nominal.focal_px, nominal.baseline_over_height,
+                       nominal.tilt_deg + tilt_offset_deg,
+                       nominal.vergence_deg + vergence_offset_deg, nominal.width, nominal.height)
+
+
+def _inside_prior(nominal: CameraSetup, tilt_jitter_deg: float,
+                  vergence_jitter_deg: float) -> CameraSetup:
+    """Return ``nominal`` moved so that its wobble stays inside :data:`SETUP_RANGES`."""
+    lo_t, hi_t = SETUP_RANGES['tilt_deg']
+    lo_v, hi_v = SETUP_RANGES['vergence_deg']
+    return CameraSetup(nominal.focal_px, nominal.baseline_over_height,
+                       float(np.clip(nominal.tilt_deg, lo_t + tilt_jitter_deg,
+                                     hi_t - tilt_jitter_deg)),
+                       float(np.clip(nominal.vergence_deg, lo_v + vergence_jitter_deg,
+                                     hi_v - vergence_jitter_deg)),
+                       nominal.width, nominal.height)
+
+
+def _boxes_ahead(rng: np.random.Generator, nominal: CameraSetup, n_boxes: int,
+                 travel: float) -> list[Box]:
+    """Return boxes placed for the head half-way along its path, beyond the path's end."""
+    world_boxes = [Box(b.x, b.z + 0.5 * travel, b.width, b.depth, b.height, b.yaw_deg)
+                   for b in random_boxes(rng, nominal, n_boxes)]
+    return [b for b in world_boxes if b.z - footprint_radius(b) > travel + 0.8]
+
+
+def _walk(n_frames: int, step: float, yaw_rate_deg: float,
+          yaw_phase: float) -> Iterator[tuple[float, float, float]]:
+    """Yield the head's ``(x, z, yaw_deg)`` per frame, relative to the start's level frame."""
+    x, z, yaw = 0.0, 0.0, 0.0
+    for i in range(n_frames):
+        yield x, z, yaw
+        yaw_step = yaw_rate_deg * math.cos(_phase(i, n_frames) + yaw_phase)
+        x += step * math.sin(math.radians(yaw))
+        z += step * math.cos(math.radians(yaw))
+        yaw += yaw_step
+
+
+def _texture_pose(origin: np.ndarray, heading0_deg: float, x: float, z: float,
+                  yaw_deg: float) -> HeadPose:
+    """Return the pose on the floor texture of a head at ``(x, z, yaw)`` from the start."""
+    h0 = math.radians(heading0_deg)
+    return HeadPose(float(origin[0] + x * math.cos(h0) + z * math.sin(h0)),
+                    float(origin[1] - x * math.sin(h0) + z * math.cos(h0)),
+                    heading0_deg + yaw_deg)
