@@ -30,90 +30,31 @@ and every step lowers it, so the same monotonicity holds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 from typing import Any
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
 from domplane_ros.core.homography import (apply_homography, as_homography, as_points,
-                                          check_homography, count_distinct, FailedEstimation,
-                                          normalise_scale, NormalisedRefiner)
+                                          check_homography, normalise_scale, NormalisedRefiner,
+                                          point_set_reason)
 from domplane_ros.core.lines import (as_segments, endpoints, LineMatcher, lines_reason,
                                      screen_line_candidates, segment_lengths)
 from domplane_ros.core.potentials import make_potential, Potential
-from domplane_ros.core.prior import prior_candidates, screen_candidates
+from domplane_ros.core.prior import prior_candidates, PriorSearch, screen_candidates
+from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 import numpy as np
 from scipy.spatial import cKDTree
+
+__all__ = ['FailedEstimate', 'PlaneEstimate', 'TwoStep', 'estimate_plane', 'gnc_scales']
 
 _GLOBAL_STEP_ITERATIONS = 2
 _POLISH_ROUNDS = 2
 _POLISH_STEPS = 2
 _LINE_POLISH_ROUNDS = 12
 _LINE_POLISH_TOLERANCE_PX = 1e-3
+# Over-relaxation of the global step: the refined H is moved this much further along its
+# update, kept if the transfer energy stays at most what it was before the step.
 OVER_RELAXATION = 0.5
-
-
-@dataclass(frozen=True)
-class PlaneEstimate:
-    """A successful dominant-plane estimate.
-
-    Attributes:
-        homography: (3, 3) float64, left pixel to right pixel, ``H[2, 2] == 1``.
-        inliers: (N,) bool, left points on the plane (a right point within the threshold).
-        matches: (N,) int64, index of each left point's closest right point.
-        residuals_px: (N,) float64 final distance from each prediction to its closest point.
-        iterations: Two-step iterations used, over all stages.
-        energy_trace: (K,) float64 joint energy after every local step.
-        stage_trace: (K,) int64 graduated non-convexity stage of each energy value.
-        converged: Whether the last stage met a tolerance before the iteration cap.
-        final_energy: Last value of the energy trace.
-        potential: Name of the potential used.
-        candidates_tried: Prior candidates that got the full iteration (0 for a warm start).
-        line_inliers: (K,) bool, left segments on the plane (a right line within the
-            threshold); empty without lines.
-        line_matches: (K,) int64, index of each left segment's closest right segment.
-        line_residuals_px: (K,) float64 final distance of each predicted segment to its
-            closest right line (:mod:`domplane_ros.core.lines`).
-        left_lines: (K, 4) float64 the left segments used (zero-length ones dropped).
-
-    """
-
-    homography: np.ndarray
-    inliers: np.ndarray
-    matches: np.ndarray
-    residuals_px: np.ndarray
-    iterations: int
-    energy_trace: np.ndarray
-    stage_trace: np.ndarray
-    converged: bool
-    final_energy: float
-    potential: str
-    candidates_tried: int = 0
-    line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, bool))
-    line_matches: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    line_residuals_px: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    ok: bool = field(default=True, init=False)
-    reason: str = field(default='', init=False)
-
-    @property
-    def n_inliers(self) -> int:
-        """Return the number of inlier left features (points plus segments)."""
-        return int(np.count_nonzero(self.inliers)) + int(np.count_nonzero(self.line_inliers))
-
-    def __bool__(self) -> bool:
-        """Return True: this is a success."""
-        return True
-
-
-@dataclass(frozen=True)
-class FailedEstimate(FailedEstimation):
-    """A failed estimate: the reason, and what the iteration got to, if it ran."""
-
-    iterations: int = 0
-    energy_trace: np.ndarray = field(default_factory=lambda: np.zeros(0))
-    n_inliers: int = 0
-    stage_trace: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
-    ok: bool = field(default=False, init=False)
 
 
 def _options(options: EstimatorConfig | None, overrides: dict[str, Any]) -> EstimatorConfig:
@@ -142,8 +83,12 @@ def gnc_scales(options: EstimatorConfig) -> list[float]:
     return scales
 
 
-class _TwoStep:
-    """State of one run: the features, the right search structures and the refiner.
+class TwoStep:
+    """The two-step iteration over one feature set, its search structures built once.
+
+    One object per feature set: the KD-tree over the right points, the right lines' matcher
+    and the normalised refiner are built here and serve every run from any start (a warm
+    start, each prior candidate) and the prior screening. Build it with :meth:`from_features`.
 
     The global step works on *rows*: one row per left point and two per left segment (its
     endpoints). A feature's share of the energy is the weighted sum over its rows, so points
@@ -233,11 +178,9 @@ class _TwoStep:
         weights = self.row_weight
         for it in range(1, options.max_iterations + 1):
             h_new, e_before, _ = self.refiner.refine(h, aux, weights, _GLOBAL_STEP_ITERATIONS)
-            if OVER_RELAXATION > 0:
-                ext = self.refiner.extrapolate(h, h_new, aux, OVER_RELAXATION, e_before,
-                                               weights)
-                if ext is not None:
-                    h_new = ext[0]
+            ext = self.refiner.extrapolate(h, h_new, aux, OVER_RELAXATION, e_before, weights)
+            if ext is not None:
+                h_new = ext[0]
             pred_new = self.apply(h_new)
             r, idx, aux_new, pen_new, terms_new, closest = self.local_step(pred_new, potential)
             # Step check: keep a previous auxiliary variable where it is cheaper under the
@@ -305,103 +248,134 @@ class _TwoStep:
                 break
         return h, r, idx
 
+    @classmethod
+    def from_features(cls, left_points: Any, right_points: Any, left_lines: Any = None,
+                      right_lines: Any = None, line_weight: float = 1.0
+                      ) -> TwoStep | FailedEstimate:
+        """Validate a feature set and build its iteration, or say why it cannot fix H.
+
+        Points alone must be 4 or more, distinct and not collinear in each image; lines alone
+        4 or more and not one pencil (all concurrent or parallel). With both, a feature kind
+        that cannot fix H on its own is left out, and it fails only if neither can.
+
+        Args:
+            left_points: (N, 2) float64 left points; None or (0, 2) with lines only.
+            right_points: (M, 2) float64 right points.
+            left_lines: Optional (K, 4) float64 left segments; with neither line set given,
+                the points are used alone.
+            right_lines: Optional (L, 4) float64 right segments.
+            line_weight: Weight of a segment's energy relative to a point's.
+
+        Returns:
+            The :class:`TwoStep`, or a :class:`FailedEstimate` with the reason.
+
+        Raises:
+            ValueError: If an array does not have shape (N, 2) (points) or (N, 4) (segments).
+
+        """
+        use_lines = left_lines is not None or right_lines is not None
+        none = np.zeros((0, 2))
+        left = as_points(none if left_points is None and use_lines else left_points,
+                         'left_points')
+        right = as_points(none if right_points is None and use_lines else right_points,
+                          'right_points')
+        has_points = left.shape[0] > 0 or right.shape[0] > 0 or not use_lines
+        point_reason = _points_reason(left, right) if has_points else ''
+        if not use_lines:
+            if point_reason:
+                return FailedEstimate(point_reason)
+            return cls(left, right, cKDTree(right))
+        left_seg = as_segments(np.zeros((0, 4)) if left_lines is None else left_lines,
+                               'left_lines')
+        right_seg = as_segments(np.zeros((0, 4)) if right_lines is None else right_lines,
+                                'right_lines')
+        line_reason = lines_reason(left_seg, 'left') or lines_reason(right_seg, 'right')
+        if line_reason:
+            if point_reason or not has_points:
+                return FailedEstimate('; and '.join(r for r in (point_reason, line_reason) if r))
+            return cls(left, right, cKDTree(right))
+        if point_reason:
+            left, right = none, none
+        left_seg = left_seg[segment_lengths(left_seg) > 0]
+        right_seg = right_seg[segment_lengths(right_seg) > 0]
+        tree = cKDTree(right) if right.shape[0] else None
+        return cls(left, right, tree, left_seg, LineMatcher(right_seg), line_weight)
+
+    def estimate(self, init: np.ndarray, options: EstimatorConfig
+                 ) -> PlaneEstimate | FailedEstimate:
+        """Run the iteration from ``init`` (the warm start), then the Euclidean refinement.
+
+        Args:
+            init: (3, 3) float64 initial homography.
+            options: Estimator settings (its ``line_weight`` was fixed at construction).
+
+        Returns:
+            :class:`PlaneEstimate`, or :class:`FailedEstimate` for a singular or non-finite
+            ``init`` or result, or too few inliers.
+
+        """
+        reason = check_homography(init)
+        if reason:
+            return FailedEstimate(f'initial {reason}')
+        energies: list[float] = []
+        stages: list[int] = []
+        h = normalise_scale(init)
+        iterations = 0
+        converged = False
+        for k, scale in enumerate(gnc_scales(options)):
+            potential = make_potential(options.potential, options.lambda_weight, scale)
+            before = len(energies)
+            h, its, converged, matched = self.run_stage(h, potential, options, energies)
+            stages.extend([k] * (len(energies) - before))
+            iterations += its
+        trace = np.asarray(energies)
+        stage_trace = np.asarray(stages, np.int64)
+        reason = check_homography(h)
+        if reason:
+            return FailedEstimate(reason, iterations, trace, 0, stage_trace)
+        if options.euclidean_refinement:
+            h, r, idx = self.polish(h, options.threshold_px, matched)
+        else:
+            _, r, idx, _ = matched
+        inliers = r < options.threshold_px
+        if np.count_nonzero(inliers) < options.min_inliers:
+            return FailedEstimate(
+                f'too few inliers: {np.count_nonzero(inliers)} < min_inliers '
+                f'{options.min_inliers}', iterations, trace, int(np.count_nonzero(inliers)),
+                stage_trace)
+        n = self.n_points
+        idx = idx.astype(np.int64)
+        return PlaneEstimate(
+            homography=normalise_scale(h), inliers=inliers[:n], matches=idx[:n],
+            residuals_px=r[:n], iterations=iterations, energy_trace=trace,
+            stage_trace=stage_trace, converged=converged, final_energy=float(trace[-1]),
+            potential=options.potential, line_inliers=inliers[n:], line_matches=idx[n:],
+            line_residuals_px=r[n:], left_lines=self.left_segments)
+
+    def screening_energy(self, candidates: np.ndarray, threshold_px: float) -> np.ndarray:
+        """Return (M,) truncated closest-feature energies of candidate homographies.
+
+        Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.core.prior.screen_candidates`),
+        segments the same with the closest-line distance, weighted by the line weight.
+
+        Args:
+            candidates: (M, 3, 3) float64 homographies.
+            threshold_px: Truncation ``t``, pixels.
+
+        """
+        costs = np.zeros(candidates.shape[0])
+        if self.n_points:
+            costs += screen_candidates(candidates, self.left, self.tree, threshold_px)
+        if self.n_lines:
+            costs += self.line_weight * screen_line_candidates(
+                candidates, self.left_segments, self.matcher, threshold_px)
+        return costs
+
 
 def _points_reason(left: np.ndarray, right: np.ndarray) -> str:
     if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
         return 'points have non-finite coordinates'
-    for pts, side in ((left, 'left'), (right, 'right')):
-        if pts.shape[0] < 4:
-            return f'need at least 4 {side} points, got {pts.shape[0]}'
-        if count_distinct(pts, 4) < 4:
-            return f'fewer than 4 distinct {side} points'
-        centred = pts - pts.mean(axis=0)
-        sv = np.linalg.svd(centred, compute_uv=False)
-        if sv[1] <= 1e-6 * max(sv[0], 1e-300):
-            return f'{side} points are collinear'
-    return ''
-
-
-def _check_inputs(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray, str]:
-    left = as_points(left, 'left_points')
-    right = as_points(right, 'right_points')
-    return left, right, _points_reason(left, right)
-
-
-def _build_state(left_points: Any, right_points: Any, left_lines: Any, right_lines: Any,
-                 line_weight: float) -> _TwoStep | str:
-    """Validate the features and build the run state, or return why they cannot fix H.
-
-    Points alone must be 4 or more, distinct and not collinear in each image; lines alone 4
-    or more and not one pencil (all concurrent or parallel). With both, a feature kind that
-    cannot fix H on its own is left out, and the estimate fails only if neither can.
-    """
-    use_lines = left_lines is not None or right_lines is not None
-    left = as_points(np.zeros((0, 2)) if left_points is None and use_lines else left_points,
-                     'left_points')
-    right = as_points(np.zeros((0, 2)) if right_points is None and use_lines
-                      else right_points, 'right_points')
-    if not use_lines:
-        reason = _points_reason(left, right)
-        return reason or _TwoStep(left, right, cKDTree(right))
-    left_seg = as_segments(np.zeros((0, 4)) if left_lines is None else left_lines,
-                           'left_lines')
-    right_seg = as_segments(np.zeros((0, 4)) if right_lines is None else right_lines,
-                            'right_lines')
-    if left.shape[0] == 0 and right.shape[0] == 0:
-        point_reason = 'no points'
-    else:
-        point_reason = _points_reason(left, right)
-    line_reason = lines_reason(left_seg, 'left') or lines_reason(right_seg, 'right')
-    if point_reason and line_reason:
-        if point_reason == 'no points':
-            return line_reason
-        return f'{point_reason}; and {line_reason}'
-    if point_reason:
-        left, right = np.zeros((0, 2)), np.zeros((0, 2))
-    if line_reason:
-        return _TwoStep(left, right, cKDTree(right))
-    left_seg = left_seg[segment_lengths(left_seg) > 0]
-    right_seg = right_seg[segment_lengths(right_seg) > 0]
-    tree = cKDTree(right) if right.shape[0] else None
-    return _TwoStep(left, right, tree, left_seg, LineMatcher(right_seg), line_weight)
-
-
-def _estimate_from(state: _TwoStep, init: np.ndarray, options: EstimatorConfig
-                   ) -> PlaneEstimate | FailedEstimate:
-    energies: list[float] = []
-    stages: list[int] = []
-    h = init
-    iterations = 0
-    converged = False
-    for k, scale in enumerate(gnc_scales(options)):
-        potential = make_potential(options.potential, options.lambda_weight, scale)
-        before = len(energies)
-        h, its, converged, matched = state.run_stage(h, potential, options, energies)
-        stages.extend([k] * (len(energies) - before))
-        iterations += its
-    trace = np.asarray(energies)
-    reason = check_homography(h)
-    if reason:
-        return FailedEstimate(reason, iterations, trace, 0, np.asarray(stages, np.int64))
-    if options.euclidean_refinement:
-        h, r, idx = state.polish(h, options.threshold_px, matched)
-    else:
-        _, r, idx, _ = matched
-    h = normalise_scale(h)
-    inliers = r < options.threshold_px
-    if np.count_nonzero(inliers) < options.min_inliers:
-        return FailedEstimate(
-            f'too few inliers: {np.count_nonzero(inliers)} < min_inliers '
-            f'{options.min_inliers}', iterations, trace, int(np.count_nonzero(inliers)),
-            np.asarray(stages, np.int64))
-    n = state.n_points
-    idx = idx.astype(np.int64)
-    return PlaneEstimate(
-        homography=h, inliers=inliers[:n], matches=idx[:n], residuals_px=r[:n],
-        iterations=iterations, energy_trace=trace, stage_trace=np.asarray(stages, np.int64),
-        converged=converged, final_energy=float(trace[-1]), potential=options.potential,
-        line_inliers=inliers[n:], line_matches=idx[n:], line_residuals_px=r[n:],
-        left_lines=state.left_segments)
+    return point_set_reason(left, 'left') or point_set_reason(right, 'right')
 
 
 def estimate_plane(left_points: Any, right_points: Any, init: Any = None,
@@ -446,88 +420,16 @@ def estimate_plane(left_points: Any, right_points: Any, init: Any = None,
     options = _options(options, overrides)
     if init is None and image_size is None:
         raise ValueError('give an initial homography (init) or the image_size for the prior')
-    state = _build_state(left_points, right_points, left_lines, right_lines,
-                         options.line_weight)
-    if isinstance(state, str):
-        return FailedEstimate(state)
+    problem = TwoStep.from_features(left_points, right_points, left_lines, right_lines,
+                                    options.line_weight)
+    if isinstance(problem, FailedEstimate):
+        return problem
     if init is not None:
-        h0 = as_homography(init, 'init')
-        reason = check_homography(h0)
-        if reason:
-            return FailedEstimate(f'initial {reason}')
-        return _estimate_from(state, normalise_scale(h0), options)
-    return _search_prior(state, prior or PriorConfig(), options, image_size)
-
-
-def prior_screening(left_points: Any, right_points: Any, candidates: np.ndarray,
-                    threshold_px: float, *, left_lines: Any = None, right_lines: Any = None,
-                    line_weight: float = 1.0) -> np.ndarray | str:
-    """Return the cheap screening energies of prior candidates, for a search over frames.
-
-    The same energy as the prior search of :func:`estimate_plane` (see
-    :func:`screening_energy`), so a caller can refine a few candidates per frame.
-
-    Args:
-        left_points: (N, 2) float64 left points.
-        right_points: (M, 2) float64 right points.
-        candidates: (K, 3, 3) float64 candidate homographies.
-        threshold_px: Truncation of the closest-feature distance, pixels.
-        left_lines: Optional (P, 4) float64 left segments.
-        right_lines: Optional (Q, 4) float64 right segments.
-        line_weight: Weight of the segments' energy.
-
-    Returns:
-        (K,) float64 energies (lower is better), or why the features cannot fix H.
-
-    """
-    state = _build_state(left_points, right_points, left_lines, right_lines, line_weight)
-    if isinstance(state, str):
-        return state
-    return screening_energy(state, candidates, threshold_px)
-
-
-def screening_energy(state: _TwoStep, candidates: np.ndarray, threshold_px: float
-                     ) -> np.ndarray:
-    """Return (M,) truncated closest-feature energies of candidate homographies.
-
-    Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.core.prior.screen_candidates`), segments
-    the same with the closest-line distance, weighted by the line weight.
-    """
-    costs = np.zeros(candidates.shape[0])
-    if state.n_points:
-        costs += screen_candidates(candidates, state.left, state.tree, threshold_px)
-    if state.n_lines:
-        costs += state.line_weight * screen_line_candidates(
-            candidates, state.left_segments, state.matcher, threshold_px)
-    return costs
-
-
-def _search_prior(state: _TwoStep, prior: PriorConfig, options: EstimatorConfig,
-                  image_size: tuple[int, int]) -> PlaneEstimate | FailedEstimate:
-    width, height = image_size
-    candidates = prior_candidates(prior, width, height)
-    costs = screening_energy(state, candidates, prior.screen_threshold_px)
-    order = np.argsort(costs)[:prior.refine_best]
-    best: PlaneEstimate | FailedEstimate | None = None
-    for i in order:
-        result = _estimate_from(state, candidates[i], options)
-        if best is None or better_estimate(result, best):
-            best = result
+        return problem.estimate(as_homography(init, 'init'), options)
+    prior = prior or PriorConfig()
+    search = PriorSearch(problem, prior_candidates(prior, *image_size),
+                         prior.screen_threshold_px)
+    order = search.ranked()[:prior.refine_best]
+    best, _ = search.refine(order, options)
     assert best is not None
-    if isinstance(best, PlaneEstimate):
-        return replace(best, candidates_tried=len(order))
-    return best
-
-
-def better_estimate(a: PlaneEstimate | FailedEstimate,
-                    b: PlaneEstimate | FailedEstimate) -> bool:
-    """Return True if ``a`` is a better search result than ``b`` (same features).
-
-    A success beats a failure; of two failures, more inliers; of two successes, the lower
-    final energy.
-    """
-    if a.ok != b.ok:
-        return bool(a.ok)
-    if not a.ok:
-        return a.n_inliers > b.n_inliers
-    return a.final_energy < b.final_energy
+    return replace(best, candidates_tried=len(order)) if best.ok else best

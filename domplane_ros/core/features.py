@@ -14,7 +14,7 @@ peak, then ``cv2.cornerSubPix``).
 from __future__ import annotations
 
 import math
-from typing import Sequence
+from typing import NamedTuple, Sequence
 
 import cv2
 from domplane_ros.config import FeatureConfig
@@ -26,6 +26,33 @@ import numpy as np
 _MIN_RESPONSE = 1e-7
 # Three iterations are enough: the start is within a pixel of the corner (measured).
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 3, 0.1)
+
+
+class Features(NamedTuple):
+    """One stereo pair's features (no correspondences between the images).
+
+    Attributes:
+        left_points: (N, 2) float64 left corners ``(x, y)``.
+        right_points: (M, 2) float64 right corners.
+        left_lines: (K, 4) float64 left segments ``(x1, y1, x2, y2)``.
+        right_lines: (L, 4) float64 right segments.
+
+    """
+
+    left_points: np.ndarray
+    right_points: np.ndarray
+    left_lines: np.ndarray
+    right_lines: np.ndarray
+
+    @property
+    def n_left(self) -> int:
+        """Return the number of left features (corners plus segments)."""
+        return int(self.left_points.shape[0] + self.left_lines.shape[0])
+
+    @property
+    def n_right(self) -> int:
+        """Return the number of right features (corners plus segments)."""
+        return int(self.right_points.shape[0] + self.right_lines.shape[0])
 
 
 def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, int, int, int]:
@@ -58,6 +85,18 @@ def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, i
             int(math.ceil(x1 * width)), int(math.ceil(y1 * height)))
 
 
+def gray_roi(gray: np.ndarray, roi: Sequence[float]) -> tuple[int, int, int, int]:
+    """Check a grey image and return its region of interest in pixels (:func:`roi_to_pixels`).
+
+    Raises:
+        ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
+
+    """
+    check_gray(gray)
+    height, width = gray.shape
+    return roi_to_pixels(roi, width, height)
+
+
 def detect_corners(gray: np.ndarray, config: FeatureConfig,
                    roi: Sequence[float] | None = None) -> np.ndarray:
     """Detect corners spread over a grid of cells, refined to sub-pixel accuracy.
@@ -78,16 +117,15 @@ def detect_corners(gray: np.ndarray, config: FeatureConfig,
         ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
 
     """
-    check_gray(gray)
+    x0, y0, x1, y1 = gray_roi(gray, config.roi if roi is None else roi)
     height, width = gray.shape
-    x0, y0, x1, y1 = roi_to_pixels(config.roi if roi is None else roi, width, height)
     empty = np.zeros((0, 2), np.float64)
     block = int(config.block_size)
     # Candidates keep this far from the image border, so the response window and the
     # sub-pixel window stay inside the image.
     border = block // 2 + 2
-    lo_x, lo_y = max(x0, border), max(y0, border)
-    hi_x, hi_y = min(x1, width - border), min(y1, height - border)
+    box = (max(x0, border), max(y0, border), min(x1, width - border), min(y1, height - border))
+    lo_x, lo_y, hi_x, hi_y = box
     if hi_x <= lo_x or hi_y <= lo_y:
         return empty
     # Compute the response on the region grown by a margin, so the region's edge is not an
@@ -96,43 +134,85 @@ def detect_corners(gray: np.ndarray, config: FeatureConfig,
     cx0, cy0 = max(0, lo_x - pad), max(0, lo_y - pad)
     cx1, cy1 = min(width, hi_x + pad), min(height, hi_y + pad)
     response = cv2.cornerMinEigenVal(gray[cy0:cy1, cx0:cx1], block, ksize=3)
-    inner = response[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
+    offset = (lo_x - cx0, lo_y - cy0)
+    found = _local_maxima(response, offset, (hi_x - lo_x, hi_y - lo_y), config)
+    if found is None:
+        return empty
+    xs, ys, strength = found
+    rows = min(config.grid_rows, hi_y - lo_y)
+    cols = min(config.grid_cols, hi_x - lo_x)
+    cell = (ys * rows // (hi_y - lo_y)) * cols + xs * cols // (hi_x - lo_x)
+    chosen = grid_round_robin(strength, cell, config.max_points)
+    return _refine_subpixel(gray, response, xs[chosen], ys[chosen], offset, box, block)
+
+
+def grid_round_robin(strength: np.ndarray, cell: np.ndarray, limit: int) -> np.ndarray:
+    """Return the indices of at most ``limit`` features taken round-robin over grid cells.
+
+    Each feature is ranked within its cell by strength; rank 0 of every cell comes first,
+    then rank 1, and so on (ties by strength), so every cell gets an equal share.
+
+    Args:
+        strength: (N,) float64 feature strengths (corner response, segment length).
+        cell: (N,) int64 grid cell of each feature.
+        limit: Most features returned.
+
+    Returns:
+        (K,) int64 indices into the features, K <= limit, in selection order.
+
+    """
+    order = np.lexsort((-strength, cell))
+    sorted_cell = cell[order]
+    first = np.searchsorted(sorted_cell, sorted_cell, side='left')
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size) - first
+    return np.lexsort((-strength, rank))[:limit]
+
+
+def _local_maxima(response: np.ndarray, offset: tuple[int, int], size: tuple[int, int],
+                  config: FeatureConfig
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+    """Return the corners of the inner window: x, y (window pixels) and response, or None.
+
+    A corner is a response above ``quality_level`` times the strongest (and above noise) that
+    is also the strongest within ``min_distance_px``.
+    """
+    (ox, oy), (w, h) = offset, size
+    inner = response[oy:oy + h, ox:ox + w]
     strongest = float(inner.max())
     if strongest <= _MIN_RESPONSE:
-        return empty
+        return None
     threshold = max(config.quality_level * strongest, _MIN_RESPONSE)
     # Keep the strongest response within min_distance_px (a square neighbourhood).
     radius = max(1, int(round(config.min_distance_px)))
     kernel = cv2.getStructuringElement(cv2.MORPH_RECT, (2 * radius + 1, 2 * radius + 1))
-    peaks = cv2.dilate(response, kernel)[lo_y - cy0:hi_y - cy0, lo_x - cx0:hi_x - cx0]
+    peaks = cv2.dilate(response, kernel)[oy:oy + h, ox:ox + w]
     # (cv2.compare takes a 1 x 1 array for a scalar, hence numpy for that size.)
     above = (cv2.compare(inner, threshold, cv2.CMP_GT) if inner.size > 1
              else (inner > threshold).astype(np.uint8) * 255)
     keep = cv2.bitwise_and(cv2.compare(inner, peaks, cv2.CMP_GE), above)
     found = cv2.findNonZero(keep)
     if found is None:
-        return empty
+        return None
     found = found.reshape(-1, 2).astype(np.int64)  # (N, 2) or (N, 1, 2) by cv2 version
     xs, ys = found[:, 0], found[:, 1]
-    strength = inner[ys, xs]
-    # Round-robin over the grid cells: rank each corner within its cell by strength, then
-    # take rank 0 of every cell, then rank 1, ... (ties by strength).
-    rows = min(config.grid_rows, hi_y - lo_y)
-    cols = min(config.grid_cols, hi_x - lo_x)
-    cell = (ys * rows // (hi_y - lo_y)) * cols + xs * cols // (hi_x - lo_x)
-    order = np.lexsort((-strength, cell))
-    sorted_cell = cell[order]
-    first = np.searchsorted(sorted_cell, sorted_cell, side='left')
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size) - first
-    chosen = np.lexsort((-strength, rank))[:config.max_points]
-    ys, xs = ys[chosen], xs[chosen]
-    # Sub-pixel refinement, first the vertex of a parabola through the response peak and its
-    # neighbours along x and y (free), then cv2.cornerSubPix (a few iterations). The parabola
-    # alone is biased at X-junctions (tiles, checkers), where the response has two peaks
-    # beside the junction; cornerSubPix moves to the saddle point. Where cornerSubPix leaves
-    # its window (blurry, edge-like corners) the parabola vertex is kept.
-    ry, rx = ys + (lo_y - cy0), xs + (lo_x - cx0)
+    return xs, ys, inner[ys, xs]
+
+
+def _refine_subpixel(gray: np.ndarray, response: np.ndarray, xs: np.ndarray, ys: np.ndarray,
+                     offset: tuple[int, int], box: tuple[int, int, int, int],
+                     block: int) -> np.ndarray:
+    """Return (N, 2) float64 sub-pixel positions of corners at window pixels ``(xs, ys)``.
+
+    First the vertex of a parabola through the response peak and its neighbours along x and
+    y (free), then cv2.cornerSubPix (a few iterations). The parabola alone is biased at
+    X-junctions (tiles, checkers), where the response has two peaks beside the junction;
+    cornerSubPix moves to the saddle point. Where cornerSubPix leaves its window (blurry,
+    edge-like corners) the parabola vertex is kept.
+    """
+    height, width = gray.shape
+    lo_x, lo_y, hi_x, hi_y = box
+    ry, rx = ys + offset[1], xs + offset[0]
     centre = response[ry, rx].astype(np.float64)
     offsets = []
     for before, after in ((response[ry, rx - 1], response[ry, rx + 1]),

@@ -3,32 +3,24 @@
 Conventions: points are ``(N, 2) float64`` arrays of pixel coordinates ``(x, y)``; a
 homography is a ``(3, 3) float64`` array mapping ``(x, y, 1)`` of the first set to the
 second, scaled so that ``H[2, 2] == 1`` where that is possible (otherwise unit Frobenius
-norm). Fitting functions return the matrix, or a :class:`FailedEstimation` that carries the
-reason: they never return a non-finite matrix and never let a numpy error escape for
-degenerate data. Wrong shapes or types are programming errors and raise ``ValueError``.
+norm). Fitting functions return the matrix, or a
+:class:`~domplane_ros.core.result.FailedEstimate` that carries the reason: they never
+return a non-finite matrix and never let a numpy error escape for degenerate data. Wrong
+shapes or types are programming errors and raise ``ValueError``.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
+from domplane_ros.core.result import FailedEstimate
 import numpy as np
 
 # Points whose projective depth falls below this are "at infinity": they are placed far away
 # (finite) so that a closest-point search treats them as unmatched.
 _MIN_W = 1e-9
 _FAR_PX = 1e9
-
-
-@dataclass(frozen=True)
-class FailedEstimation:
-    """A failed estimate: false in a boolean context, with the reason in words."""
-
-    reason: str
-
-    def __bool__(self) -> bool:
-        """Return False: a failure never passes for a result."""
-        return False
+# A point set whose second singular value (centred) is at most this fraction of its first is
+# collinear: it cannot fix a homography.
+_COLLINEAR_RATIO = 1e-6
 
 
 def as_points(points: object, name: str = 'points') -> np.ndarray:
@@ -45,12 +37,30 @@ def as_points(points: object, name: str = 'points') -> np.ndarray:
         ValueError: If the shape is not (N, 2) or the values are not numbers.
 
     """
+    return as_rows(points, 2, name, 'coordinates')
+
+
+def as_rows(values: object, columns: int, name: str, what: str, layout: str = '',
+            empty_ok: bool = False) -> np.ndarray:
+    """Return ``values`` as a ``(N, columns) float64`` array, or raise ``ValueError``.
+
+    Args:
+        values: Anything array-like of shape (N, columns).
+        columns: Values per row.
+        name: Name used in the error messages.
+        what: What the rows are, for the message (``'coordinates'``).
+        layout: The row layout for the shape message (``' (x1, y1, x2, y2)'``), or ``''``.
+        empty_ok: Whether an empty array of any shape gives ``(0, columns)``.
+
+    """
     try:
-        arr = np.asarray(points, dtype=np.float64)
+        arr = np.asarray(values, dtype=np.float64)
     except (TypeError, ValueError) as err:
-        raise ValueError(f'{name} must be numeric (N, 2) coordinates') from err
-    if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f'{name} must have shape (N, 2), got {arr.shape}')
+        raise ValueError(f'{name} must be numeric (N, {columns}) {what}') from err
+    if empty_ok and arr.size == 0:
+        return np.zeros((0, columns), np.float64)
+    if arr.ndim != 2 or arr.shape[1] != columns:
+        raise ValueError(f'{name} must have shape (N, {columns}){layout}, got {arr.shape}')
     return arr
 
 
@@ -166,6 +176,29 @@ def count_distinct(points: np.ndarray, enough: int) -> int:
     return int(np.unique(points, axis=0).shape[0])
 
 
+def point_set_reason(points: np.ndarray, side: str) -> str:
+    """Return why a point set cannot fix a homography, or ``''`` if it can.
+
+    Args:
+        points: (N, 2) float64 finite points.
+        side: Name of the set in the reason (``'left'``, ``'source'``, ...).
+
+    Returns:
+        ``''``, or the reason: fewer than 4 points, fewer than 4 distinct points, or all
+        points (nearly) on one line.
+
+    """
+    if points.shape[0] < 4:
+        return f'need at least 4 {side} points, got {points.shape[0]}'
+    if count_distinct(points, 4) < 4:
+        return f'fewer than 4 distinct {side} points'
+    centred = points - points.mean(axis=0)
+    sv = np.linalg.svd(centred, compute_uv=False)
+    if sv[1] <= _COLLINEAR_RATIO * max(sv[0], 1e-300):
+        return f'{side} points are collinear'
+    return ''
+
+
 def _degenerate_reason(src: np.ndarray, dst: np.ndarray,
                        weights: np.ndarray | None) -> str:
     if src.shape != dst.shape:
@@ -181,50 +214,15 @@ def _degenerate_reason(src: np.ndarray, dst: np.ndarray,
         dst = dst[weights > 0]
     if src.shape[0] < 4:
         return f'need at least 4 point pairs, got {src.shape[0]}'
-    for pts, side in ((src, 'source'), (dst, 'destination')):
-        if count_distinct(pts, 4) < 4:
-            return f'fewer than 4 distinct {side} points'
-        centred = pts - pts.mean(axis=0)
-        s = np.linalg.svd(centred, compute_uv=False)
-        if s[1] <= 1e-9 * max(s[0], 1e-300):
-            return f'{side} points are collinear'
-    return ''
+    return point_set_reason(src, 'source') or point_set_reason(dst, 'destination')
 
 
-def fit_homography_dlt(src: np.ndarray, dst: np.ndarray,
-                       weights: np.ndarray | None = None) -> np.ndarray | FailedEstimation:
-    """Fit a homography by the normalised, weighted direct linear transform.
+def _dlt_system(s: np.ndarray, d: np.ndarray, w: np.ndarray | None) -> np.ndarray:
+    """Return the (max(2N, 9), 9) DLT matrix of normalised pairs ``(s_i, d_i)``, row-weighted.
 
-    Args:
-        src: (N, 2) float64 source points.
-        dst: (N, 2) float64 destination points, row i paired with ``src[i]``.
-        weights: Optional (N,) non-negative row weights (each point's two equations are
-            multiplied by ``sqrt(w)``).
-
-    Returns:
-        (3, 3) float64 homography with ``H[2, 2] == 1``, or :class:`FailedEstimation` for
-        fewer than 4 pairs, repeated or collinear points, non-finite values, or a
-        rank-deficient system.
-
-    Raises:
-        ValueError: If ``src`` or ``dst`` is not (N, 2).
-
+    At least 9 rows, so that the SVD also returns the null vector for 4 points.
     """
-    src = as_points(src, 'src')
-    dst = as_points(dst, 'dst')
-    w = None if weights is None else np.asarray(weights, dtype=np.float64)
-    reason = _degenerate_reason(src, dst, w)
-    if reason:
-        return FailedEstimation(reason)
-    if w is not None:
-        keep = w > 0
-        src, dst, w = src[keep], dst[keep], w[keep]
-    t_src = similarity_normaliser(src)
-    t_dst = similarity_normaliser(dst)
-    s = _transform(t_src, src)
-    d = _transform(t_dst, dst)
     n = s.shape[0]
-    # At least 9 rows, so that the SVD also returns the null vector for 4 points.
     a = np.zeros((max(2 * n, 9), 9))
     ones = np.ones(n)
     ax = a[:2 * n]
@@ -242,18 +240,87 @@ def fit_homography_dlt(src: np.ndarray, dst: np.ndarray,
     ax[1::2, 8] = d[:, 1]
     if w is not None:
         a[:2 * n] *= np.repeat(np.sqrt(w), 2)[:, None]
+    return a
+
+
+def fit_homography_dlt(src: np.ndarray, dst: np.ndarray,
+                       weights: np.ndarray | None = None) -> np.ndarray | FailedEstimate:
+    """Fit a homography by the normalised, weighted direct linear transform.
+
+    Args:
+        src: (N, 2) float64 source points.
+        dst: (N, 2) float64 destination points, row i paired with ``src[i]``.
+        weights: Optional (N,) non-negative row weights (each point's two equations are
+            multiplied by ``sqrt(w)``).
+
+    Returns:
+        (3, 3) float64 homography with ``H[2, 2] == 1``, or :class:`FailedEstimate` for
+        fewer than 4 pairs, repeated or collinear points, non-finite values, or a
+        rank-deficient system.
+
+    Raises:
+        ValueError: If ``src`` or ``dst`` is not (N, 2).
+
+    """
+    src = as_points(src, 'src')
+    dst = as_points(dst, 'dst')
+    w = None if weights is None else np.asarray(weights, dtype=np.float64)
+    reason = _degenerate_reason(src, dst, w)
+    if reason:
+        return FailedEstimate(reason)
+    if w is not None:
+        keep = w > 0
+        src, dst, w = src[keep], dst[keep], w[keep]
+    t_src = similarity_normaliser(src)
+    t_dst = similarity_normaliser(dst)
+    a = _dlt_system(_transform(t_src, src), _transform(t_dst, dst), w)
     try:
         _, sv, vt = np.linalg.svd(a, full_matrices=False)
     except np.linalg.LinAlgError:
-        return FailedEstimation('DLT did not converge (SVD failure)')
+        return FailedEstimate('DLT did not converge (SVD failure)')
     if sv[0] <= 0 or sv[-2] <= 1e-9 * sv[0]:
-        return FailedEstimation('DLT system is rank deficient (degenerate configuration)')
+        return FailedEstimate('DLT system is rank deficient (degenerate configuration)')
     g = vt[-1].reshape(3, 3)
     h = np.linalg.inv(t_dst) @ g @ t_src
     reason = check_homography(h)
     if reason:
-        return FailedEstimation(reason)
+        return FailedEstimate(reason)
     return normalise_scale(h)
+
+
+def _normal_equations(m: np.ndarray, px: np.ndarray, py: np.ndarray, dst_n: np.ndarray,
+                      weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """Return Gauss-Newton's ``(J^T W J, J^T W r)`` (9 x 9, 9) of the transfer residuals.
+
+    Args:
+        m: (N, 3) float64 ``(x, y, 1) / w``, the homogeneous sources over their depths.
+        px: (N,) float64 predicted x (normalised).
+        py: (N,) float64 predicted y (normalised).
+        dst_n: (N, 2) float64 normalised destinations.
+        weights: Optional (N,) non-negative weights.
+
+    """
+    rx = px - dst_n[:, 0]
+    ry = py - dst_n[:, 1]
+    # The Jacobian of the x residual is [m, 0, -px m] and of the y residual
+    # [0, m, -py m], with m = (x, y, 1) / w: assemble J^T J and J^T r from 3x3 blocks.
+    mw = m if weights is None else m * weights[:, None]
+    a = mw.T @ m
+    b = mw.T @ (m * px[:, None])
+    c = mw.T @ (m * py[:, None])
+    d = mw.T @ (m * (px * px + py * py)[:, None])
+    normal = np.empty((9, 9))
+    normal[0:3, 0:3] = a
+    normal[3:6, 3:6] = a
+    normal[0:3, 3:6] = 0.0
+    normal[3:6, 0:3] = 0.0
+    normal[0:3, 6:9] = -b
+    normal[6:9, 0:3] = -b.T
+    normal[3:6, 6:9] = -c
+    normal[6:9, 3:6] = -c.T
+    normal[6:9, 6:9] = d
+    grad = np.concatenate([mw.T @ rx, mw.T @ ry, -(mw.T @ (px * rx + py * ry))])
+    return normal, grad
 
 
 class NormalisedRefiner:
@@ -363,27 +430,7 @@ class NormalisedRefiner:
             iw = 1.0 / w
             px = uvw[:, 0] * iw
             py = uvw[:, 1] * iw
-            rx = px - dst_n[:, 0]
-            ry = py - dst_n[:, 1]
-            # The Jacobian of the x residual is [m, 0, -px m] and of the y residual
-            # [0, m, -py m], with m = (x, y, 1) / w: assemble J^T J and J^T r from 3x3 blocks.
-            m = src_h * iw[:, None]
-            mw = m if weights is None else m * weights[:, None]
-            a = mw.T @ m
-            b = mw.T @ (m * px[:, None])
-            c = mw.T @ (m * py[:, None])
-            d = mw.T @ (m * (px * px + py * py)[:, None])
-            normal = np.empty((9, 9))
-            normal[0:3, 0:3] = a
-            normal[3:6, 3:6] = a
-            normal[0:3, 3:6] = 0.0
-            normal[3:6, 0:3] = 0.0
-            normal[0:3, 6:9] = -b
-            normal[6:9, 0:3] = -b.T
-            normal[3:6, 6:9] = -c
-            normal[6:9, 3:6] = -c.T
-            normal[6:9, 6:9] = d
-            grad = np.concatenate([mw.T @ rx, mw.T @ ry, -(mw.T @ (px * rx + py * ry))])
+            normal, grad = _normal_equations(src_h * iw[:, None], px, py, dst_n, weights)
             gvec = g.ravel()
             # J g = 0 (scale gauge); adding g g^T fixes the scale and makes the system regular.
             normal += np.outer(gvec, gvec)
@@ -409,7 +456,7 @@ class NormalisedRefiner:
 
 def refine_homography(matrix: np.ndarray, src: np.ndarray, dst: np.ndarray,
                       weights: np.ndarray | None = None,
-                      iterations: int = 10) -> np.ndarray | FailedEstimation:
+                      iterations: int = 10) -> np.ndarray | FailedEstimate:
     """Refine a homography by minimising the Euclidean transfer error (Gauss-Newton).
 
     Args:
@@ -421,7 +468,7 @@ def refine_homography(matrix: np.ndarray, src: np.ndarray, dst: np.ndarray,
 
     Returns:
         (3, 3) float64 refined homography (its transfer energy is never above the initial
-        one), or :class:`FailedEstimation` for degenerate input.
+        one), or :class:`FailedEstimate` for degenerate input.
 
     Raises:
         ValueError: On wrong shapes.
@@ -433,16 +480,16 @@ def refine_homography(matrix: np.ndarray, src: np.ndarray, dst: np.ndarray,
     w = None if weights is None else np.asarray(weights, dtype=np.float64)
     reason = check_homography(matrix) or _degenerate_reason(src, dst, w)
     if reason:
-        return FailedEstimation(reason)
+        return FailedEstimate(reason)
     refined, _, _ = NormalisedRefiner(src, dst).refine(matrix, dst, w, iterations)
     reason = check_homography(refined)
     if reason:
-        return FailedEstimation(reason)
+        return FailedEstimate(reason)
     return refined
 
 
 def fit_homography(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None,
-                   iterations: int = 10) -> np.ndarray | FailedEstimation:
+                   iterations: int = 10) -> np.ndarray | FailedEstimate:
     """Fit a homography: normalised DLT, then Euclidean refinement.
 
     Args:
@@ -452,7 +499,7 @@ def fit_homography(src: np.ndarray, dst: np.ndarray, weights: np.ndarray | None 
         iterations: Gauss-Newton steps of the refinement.
 
     Returns:
-        (3, 3) float64 homography or :class:`FailedEstimation`.
+        (3, 3) float64 homography or :class:`FailedEstimate`.
 
     Raises:
         ValueError: On wrong shapes.

@@ -80,6 +80,20 @@ def _integer_field(msg: Any, name: str, allow_bool: bool = False) -> int:
     return value
 
 
+def _message_data(msg: Any, what: str) -> np.ndarray:
+    """Return the ``data`` field of a message as a flat ``uint8`` array (see _data_bytes).
+
+    Raises:
+        ImageDecodeError: If the message has no ``data`` field, or it is not a byte buffer.
+
+    """
+    try:
+        data = msg.data
+    except AttributeError as err:
+        raise ImageDecodeError(f"{what} message has no 'data' field") from err
+    return _data_bytes(data)
+
+
 def _data_bytes(data: Any) -> np.ndarray:
     """View message data as a flat ``uint8`` array.
 
@@ -174,10 +188,7 @@ def image_to_array(msg: Any) -> tuple[np.ndarray, str]:
         raise ImageDecodeError(
             f'step {step} is smaller than width * bytes_per_pixel = {width} * '
             f'{bytes_per_pixel} = {width * bytes_per_pixel}', kind='step')
-    try:
-        data = _data_bytes(msg.data)
-    except AttributeError as err:
-        raise ImageDecodeError("image message has no 'data' field") from err
+    data = _message_data(msg, 'image')
     if data.size != height * step:
         raise ImageDecodeError(
             f'data length {data.size} != height * step = {height} * {step} = {height * step}',
@@ -254,10 +265,7 @@ def compressed_to_gray(msg: Any) -> np.ndarray:
         raise ImageDecodeError(
             f'unsupported compressed format {fmt!r}; supported compressions are '
             f'{", ".join(SUPPORTED_COMPRESSED_FORMATS)}', kind='encoding')
-    try:
-        data = _data_bytes(msg.data)
-    except AttributeError as err:
-        raise ImageDecodeError("compressed image message has no 'data' field") from err
+    data = _message_data(msg, 'compressed image')
     if data.size == 0:
         raise ImageDecodeError(f'compressed image data is empty (format {fmt!r})',
                                kind='compressed')

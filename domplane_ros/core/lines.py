@@ -47,9 +47,8 @@ from typing import Any, Sequence
 
 import cv2
 from domplane_ros.config import FeatureConfig
-from domplane_ros.core.features import roi_to_pixels
-from domplane_ros.core.homography import apply_homography, similarity_normaliser
-from domplane_ros.core.image import check_gray
+from domplane_ros.core.features import gray_roi, grid_round_robin
+from domplane_ros.core.homography import apply_homography, as_rows, similarity_normaliser
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -70,15 +69,8 @@ def as_segments(segments: Any, name: str = 'segments') -> np.ndarray:
         ValueError: If the shape is not (N, 4) or the values are not numbers.
 
     """
-    try:
-        arr = np.asarray(segments, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f'{name} must be numeric (N, 4) segments (x1, y1, x2, y2)') from err
-    if arr.size == 0:
-        return np.zeros((0, 4), np.float64)
-    if arr.ndim != 2 or arr.shape[1] != 4:
-        raise ValueError(f'{name} must have shape (N, 4) (x1, y1, x2, y2), got {arr.shape}')
-    return arr
+    return as_rows(segments, 4, name, 'segments (x1, y1, x2, y2)', ' (x1, y1, x2, y2)',
+                   empty_ok=True)
 
 
 def segment_lengths(segments: np.ndarray) -> np.ndarray:
@@ -163,9 +155,7 @@ def detect_lines(gray: np.ndarray, config: FeatureConfig,
         ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
 
     """
-    check_gray(gray)
-    height, width = gray.shape
-    x0, y0, x1, y1 = roi_to_pixels(config.roi if roi is None else roi, width, height)
+    x0, y0, x1, y1 = gray_roi(gray, config.roi if roi is None else roi)
     empty = np.zeros((0, 4), np.float64)
     if x1 - x0 < 8 or y1 - y0 < 8:
         return empty
@@ -185,13 +175,7 @@ def detect_lines(gray: np.ndarray, config: FeatureConfig,
     cols = config.grid_cols
     cell = (np.clip((mid_y * rows // (y1 - y0)).astype(np.int64), 0, rows - 1) * cols
             + np.clip((mid_x * cols // (x1 - x0)).astype(np.int64), 0, cols - 1))
-    order = np.lexsort((-length, cell))
-    sorted_cell = cell[order]
-    first = np.searchsorted(sorted_cell, sorted_cell, side='left')
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size) - first
-    chosen = np.lexsort((-length, rank))[:config.max_lines]
-    return seg[chosen]
+    return seg[grid_round_robin(length, cell, config.max_lines)]
 
 
 class LineMatcher:

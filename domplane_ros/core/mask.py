@@ -137,19 +137,38 @@ def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     hom_small = scale_right @ hom @ np.linalg.inv(scale_left)
     if not np.all(np.isfinite(hom_small)):
         raise ValueError('homography is not invertible at mask scale')
-    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
-    warped = cv2.warpPerspective(right_small, hom_small, (small_w, small_h), flags=flags,
-                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    inside = cv2.warpPerspective(np.full(right_small.shape, 255, np.uint8), hom_small,
-                                 (small_w, small_h), flags=flags,
-                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
     window = int(config.window_px)
-    kernel = np.ones((window, window), np.uint8)
-    # A window is valid when all its pixels map inside the right image (with all four
-    # bilinear neighbours inside).
-    valid = cv2.erode(inside, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 255
+    warped, valid = _warp_to_left(right_small, hom_small, (small_w, small_h), window)
+    labels = _ncc_labels(left_small, warped, valid, window, config)
+    _open_and_close(labels, valid, int(config.morph_px))
+    if fill_enclosed:
+        _fill_enclosed(labels, (labels == UNKNOWN) & valid)
+    if (small_h, small_w) != (height, width):
+        labels = cv2.resize(labels, (width, height), interpolation=cv2.INTER_NEAREST_EXACT)
+    return labels
 
-    a = left_small.astype(np.float32)
+
+def _warp_to_left(right: np.ndarray, homography: np.ndarray, size: tuple[int, int],
+                  window: int) -> tuple[np.ndarray, np.ndarray]:
+    """Return the right image warped into the left view, and the (h, w) bool valid windows.
+
+    A window is valid when all its pixels map inside the right image (with all four bilinear
+    neighbours inside).
+    """
+    flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
+    warped = cv2.warpPerspective(right, homography, size, flags=flags,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    inside = cv2.warpPerspective(np.full(right.shape, 255, np.uint8), homography, size,
+                                 flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    kernel = np.ones((window, window), np.uint8)
+    valid = cv2.erode(inside, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 255
+    return warped, valid
+
+
+def _ncc_labels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, window: int,
+                config: MaskConfig) -> np.ndarray:
+    """Return (h, w) uint8 labels by the local zero-mean NCC of two aligned images."""
+    a = left.astype(np.float32)
     b = warped.astype(np.float32)
     size = (window, window)
     mean_a = cv2.blur(a, size)
@@ -163,30 +182,29 @@ def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     # ncc >= t  <=>  cov >= t sqrt(var_a var_b), without dividing by small numbers.
     bound = config.ncc_threshold * np.sqrt(np.maximum(var_a * var_b, 0.0))
     on_plane = decided & (cov >= bound)
-    labels = np.full((small_h, small_w), UNKNOWN, np.uint8)
+    labels = np.full(left.shape, UNKNOWN, np.uint8)
     labels[decided] = OBSTACLE
     labels[on_plane] = PLANE
-
-    morph = int(config.morph_px)
-    if morph >= 2:
-        square = np.ones((morph, morph), np.uint8)
-        for value in (OBSTACLE, PLANE):
-            region = (labels == value).astype(np.uint8)
-            cleaned = cv2.morphologyEx(region, cv2.MORPH_OPEN, square)
-            cleaned = cv2.morphologyEx(cleaned, cv2.MORPH_CLOSE, square)
-            # Opening drops specks (to unknown). Closing fills gaps inside a region: the
-            # obstacle's may claim plane and unknown pixels, the plane's only unknown ones,
-            # so obstacles stay intact; pixels outside the right image stay unknown.
-            labels[(region == 1) & (cleaned == 0)] = UNKNOWN
-            claim = (cleaned == 1) & (region == 0) & valid
-            if value == PLANE:
-                claim &= labels == UNKNOWN
-            labels[claim] = value
-    if fill_enclosed:
-        _fill_enclosed(labels, (labels == UNKNOWN) & valid)
-    if (small_h, small_w) != (height, width):
-        labels = cv2.resize(labels, (width, height), interpolation=cv2.INTER_NEAREST_EXACT)
     return labels
+
+
+def _open_and_close(labels: np.ndarray, valid: np.ndarray, morph: int) -> None:
+    """Clean the plane and obstacle labels in place by a ``morph`` square (< 2: no-op)."""
+    if morph < 2:
+        return
+    square = np.ones((morph, morph), np.uint8)
+    for value in (OBSTACLE, PLANE):
+        region = (labels == value).astype(np.uint8)
+        cleaned = cv2.morphologyEx(region, cv2.MORPH_OPEN, square)
+        cleaned = cv2.morphologyEx(cleaned, cv2.MORPH_CLOSE, square)
+        # Opening drops specks (to unknown). Closing fills gaps inside a region: the
+        # obstacle's may claim plane and unknown pixels, the plane's only unknown ones,
+        # so obstacles stay intact; pixels outside the right image stay unknown.
+        labels[(region == 1) & (cleaned == 0)] = UNKNOWN
+        claim = (cleaned == 1) & (region == 0) & valid
+        if value == PLANE:
+            claim &= labels == UNKNOWN
+        labels[claim] = value
 
 
 def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = None,

@@ -68,10 +68,6 @@ class Potential:
         s = self.step(r)
         return 0.5 * s * s + self.penalty(r - s)
 
-    def is_inlier(self, r: np.ndarray) -> np.ndarray:
-        """Return the (N,) bool decision: the prediction has a partner within the threshold."""
-        return r < self.threshold_px
-
     def __repr__(self) -> str:
         """Return the name and parameters."""
         return (f'{type(self).__name__}(lambda_weight={self.lambda_weight}, '

@@ -13,17 +13,24 @@ The camera model (shared with the scene renderer in :mod:`domplane_ros.sim.scene
 
 A plane point then maps from the left to the right image by
 ``H = K R_v (I - C n^T / h) K^-1``, which depends on ``b`` and ``h`` only through ``b / h``.
+
+The search (:class:`PriorSearch`) screens every candidate by a cheap truncated
+closest-feature energy and runs the full two-step iteration from the best few; the one-shot
+estimator refines them all at once, the pipeline a few per frame.
 """
 
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import Callable, Collection, Iterable, TYPE_CHECKING
 
+from domplane_ros.core.homography import apply_homography
+from domplane_ros.core.result import better_estimate, FailedEstimate, PlaneEstimate
 import numpy as np
 
 if TYPE_CHECKING:
-    from domplane_ros.config import PriorConfig
+    from domplane_ros.config import EstimatorConfig, PriorConfig
+    from domplane_ros.core.estimator import TwoStep
     from scipy.spatial import cKDTree
 
 
@@ -128,11 +135,70 @@ def screen_candidates(candidates: np.ndarray, left_points: np.ndarray, right_tre
         (M,) float64 screening energies.
 
     """
-    from domplane_ros.core.homography import apply_homography
-
     m = candidates.shape[0]
     n = left_points.shape[0]
     pred = np.concatenate([apply_homography(h, left_points) for h in candidates])
     d, _ = right_tree.query(pred, distance_upper_bound=threshold_px)
     d = np.minimum(d, threshold_px).reshape(m, n)
     return np.sum(d * d, axis=1)
+
+
+class PriorSearch:
+    """The prior search over one feature set: screen every candidate, refine the best.
+
+    One search serves :func:`~domplane_ros.core.estimator.estimate_plane` (the best
+    ``prior.refine_best`` at once) and the pipeline (a few per frame, new features each
+    frame). The feature set's search structures (the right points' KD-tree, the line matcher,
+    the refiner) live in ``problem``, built once and shared by the screening and every
+    refinement.
+
+    Args:
+        problem: The two-step iteration over the feature set
+            (:meth:`~domplane_ros.core.estimator.TwoStep.from_features`).
+        candidates: (M, 3, 3) float64 candidate homographies (:func:`prior_candidates`).
+        threshold_px: Truncation of the screening energy, pixels.
+
+    """
+
+    def __init__(self, problem: TwoStep, candidates: np.ndarray, threshold_px: float) -> None:
+        """Screen every candidate."""
+        self.problem = problem
+        self.candidates = candidates
+        self.costs = problem.screening_energy(candidates, threshold_px)
+
+    def ranked(self, skip: Collection[int] = ()) -> list[int]:
+        """Return the candidates' indices, lowest screening energy first, leaving out ``skip``.
+
+        Ties keep the index order.
+        """
+        return [int(i) for i in np.argsort(self.costs, kind='stable') if int(i) not in skip]
+
+    def refine(self, indices: Iterable[int], options: EstimatorConfig,
+               rejection: Callable[[PlaneEstimate], str] | None = None,
+               best: PlaneEstimate | FailedEstimate | None = None
+               ) -> tuple[PlaneEstimate | FailedEstimate | None, str]:
+        """Run the full iteration from each candidate of ``indices``; keep the best result.
+
+        Args:
+            indices: Candidates to refine.
+            options: Estimator settings.
+            rejection: Optional check of a successful result: it returns why the result must
+                not be taken (``''`` if it may); a rejected result is dropped.
+            best: The best result so far (from earlier frames' candidates), if any; a
+                candidate replaces it only if it is better.
+
+        Returns:
+            The best result that was not rejected (see
+            :func:`~domplane_ros.core.result.better_estimate`), None if there was none, and
+            the reason of the last rejection (``''`` if none was rejected).
+
+        """
+        rejected = ''
+        for index in indices:
+            result = self.problem.estimate(self.candidates[index], options)
+            reason = rejection(result) if rejection is not None and result.ok else ''
+            if reason:
+                rejected = reason
+            elif best is None or better_estimate(result, best):
+                best = result
+        return best, rejected

@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import cv2
-from domplane_ros.core.homography import apply_homography, check_homography, normalise_scale
+from domplane_ros.core.homography import check_homography, normalise_scale
 import numpy as np
 
 if TYPE_CHECKING:
@@ -199,22 +199,3 @@ def predict_plane_homography(last: np.ndarray, motion_left: np.ndarray,
     if check_homography(h):
         return None
     return normalise_scale(h)
-
-
-def transfer_shift_px(a: np.ndarray, b: np.ndarray, width: int, height: int) -> float:
-    """Return the largest distance between two homographies' images of the image corners.
-
-    Args:
-        a: (3, 3) float64 homography.
-        b: (3, 3) float64 homography.
-        width: Image width, pixels.
-        height: Image height, pixels.
-
-    Returns:
-        The largest corner displacement, pixels.
-
-    """
-    corners = np.array([[0.0, 0.0], [width - 1.0, 0.0], [width - 1.0, height - 1.0],
-                        [0.0, height - 1.0]])
-    diff = apply_homography(a, corners) - apply_homography(b, corners)
-    return float(np.max(np.linalg.norm(diff, axis=1)))

@@ -14,24 +14,27 @@ import math
 import time
 
 from domplane_ros.config import PlaneNodeConfig, PriorConfig
-from domplane_ros.core.estimator import (better_estimate, estimate_plane, FailedEstimate,
-                                         PlaneEstimate, prior_screening)
-from domplane_ros.core.features import detect_corners, roi_to_pixels
-from domplane_ros.core.homography import apply_homography
+from domplane_ros.core.estimator import TwoStep
+from domplane_ros.core.features import detect_corners, Features, roi_to_pixels
+from domplane_ros.core.homography import apply_homography, as_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.lines import detect_lines, endpoints
-from domplane_ros.core.mask import overlay, plane_mask
-from domplane_ros.core.prior import prior_candidates
+from domplane_ros.core.mask import plane_mask
+from domplane_ros.core.prior import prior_candidates, PriorSearch
+from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import camera_motion, predict_plane_homography
+from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.health import (homography_problem, inlier_spread, InputCounts,
                                         PairChecks, texture_note)
 import numpy as np
+
+__all__ = ['FrameResult', 'LOCKED', 'PipelineStats', 'PlanePipeline', 'SEARCHING', 'TRACKING',
+           'debug_overlay']
 
 # Lock states reported in diagnostics.
 LOCKED = 'locked'        # the last frame gave a plane; the next one warm-starts from it
 TRACKING = 'tracking'    # an estimate failed; the last plane is carried through the motion
 SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidates per frame
-LOCK_STATES = (LOCKED, TRACKING, SEARCHING)
 
 # Margin (fraction of the image diagonal) around the image-corner positions that the prior's
 # candidates reach; a homography moving a corner beyond it violates the prior.
@@ -39,67 +42,6 @@ _PRIOR_BOUNDS_MARGIN = 0.15
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
 _WIDE_BASIN_FACTOR = 4.0
-
-
-@dataclass(frozen=True)
-class FrameResult:
-    """What the pipeline made of one stereo pair.
-
-    Attributes:
-        stamp_ns: The pair's stamp (the left image's), nanoseconds.
-        ok: Whether a plane was found; if not, ``homography`` is None and the mask is all 0.
-        homography: (3, 3) float64 left-to-right homography with ``H[2, 2] == 1``, or None.
-        mask: (H, W) uint8 left-image mask: 255 plane, 127 obstacle, 0 unknown.
-        estimate: The estimator's result (success or failure value).
-        left_points: (N, 2) float64 left corners.
-        right_points: (M, 2) float64 right corners.
-        reinitialised: True if this frame worked on the prior search (or the configured
-            initial homography) rather than a warm start.
-        reason: Why the frame failed ('' when ok).
-        state: Lock state after this frame: ``'locked'``, ``'tracking'`` or ``'searching'``.
-        timings_ms: Milliseconds spent in ``features``, ``tracking``, ``estimate``, ``mask``
-            and ``total``.
-        warnings: Input problems that did not refuse the pair (a stamp jump, a size change),
-            each a one-line message (see :mod:`domplane_ros.stream.health`).
-        left_lines: (K, 4) float64 left line segments ``(x1, y1, x2, y2)`` (empty unless
-            ``features.kind`` is ``lines`` or ``both``).
-        right_lines: (L, 4) float64 right line segments.
-        warm_start: Where this frame's estimate started: ``'prediction'`` (the last
-            homography moved through the tracked camera motion), ``'last'`` (the last
-            homography as is), ``'search'`` (prior candidates), ``'initial'`` (the
-            configured initial homography).
-        prediction: (3, 3) float64 predicted homography ``M_right H M_left^-1`` of this frame,
-            or None when tracking gave none.
-        candidates: Prior candidates refined in this frame (at most
-            ``pipeline.search_candidates_per_frame``).
-        fast_motion: True if the head's joints moved faster than
-            ``pipeline.fast_joint_velocity``.
-
-    """
-
-    stamp_ns: int
-    ok: bool
-    homography: np.ndarray | None
-    mask: np.ndarray
-    estimate: PlaneEstimate | FailedEstimate
-    left_points: np.ndarray
-    right_points: np.ndarray
-    reinitialised: bool
-    reason: str
-    state: str
-    timings_ms: dict[str, float] = field(default_factory=dict)
-    warnings: tuple[str, ...] = ()
-    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    right_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
-    warm_start: str = ''
-    prediction: np.ndarray | None = None
-    candidates: int = 0
-    fast_motion: bool = False
-
-    @property
-    def n_inliers(self) -> int:
-        """Return the number of inlier left points (0 on failure)."""
-        return self.estimate.n_inliers if self.estimate is not None else 0
 
 
 @dataclass
@@ -227,10 +169,7 @@ class PlanePipeline:
 
         """
         t0 = time.perf_counter()
-        check_gray(left, 'left')
-        check_gray(right, 'right')
-        if joint_speed is not None and not math.isfinite(joint_speed):
-            raise ValueError(f'joint_speed must be finite, got {joint_speed!r}')
+        _check_frame(left, right, joint_speed)
         check = self.checks.check(left, right, stamp_ns, self.config.pipeline)
         if reset or check.reset:
             self.reset()
@@ -240,30 +179,13 @@ class PlanePipeline:
         if check.refused:
             return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
         feats = _detect(left, right, cfg)
-        left_pts, right_pts = feats[0], feats[1]
         t1 = time.perf_counter()
-        height, width = left.shape
-        size = (width, height)
         track_pts = self._tracking_points(left, right, feats)
         motions = self._camera_motions(left, right)
         t2 = time.perf_counter()
-        step = _Step()
-        if self._state != SEARCHING:
-            self._track_or_lock(step, feats, size, motions, fast)
-        if self._state == SEARCHING:
-            self._search_step(step, feats, size, motions)
+        step = self._estimate(feats, left.shape, motions, fast)
         t3 = time.perf_counter()
-        estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
-        if step.accepted:
-            h = estimate.homography
-            mask = plane_mask(left, right, h, cfg.mask)
-            self._last_h = h
-            self._last_energy_per_point = estimate.final_energy / max(_n_left(feats), 1)
-            self.stats.succeeded += 1
-        else:
-            h = None
-            mask = np.zeros(left.shape, np.uint8)
-            self.stats.failed += 1
+        estimate, h, mask = self._publish(step, left, right, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
             self.counts.add('too_few_features')
@@ -271,16 +193,46 @@ class PlanePipeline:
         if not step.keep_previous:
             self._previous = _Previous(left.copy(), right.copy(), *track_pts)
         t4 = time.perf_counter()
-        timings = {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
-                   'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3),
-                   'total': 1e3 * (t4 - t0)}
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
-                           estimate=estimate, left_points=left_pts, right_points=right_pts,
-                           reinitialised=step.reinitialised, reason=reason,
-                           state=self._state, timings_ms=timings, warnings=check.warnings,
-                           left_lines=feats[2], right_lines=feats[3],
-                           warm_start=step.warm_start, prediction=step.prediction,
-                           candidates=step.candidates, fast_motion=fast)
+                           estimate=estimate, left_points=feats.left_points,
+                           right_points=feats.right_points, reinitialised=step.reinitialised,
+                           reason=reason, state=self._state,
+                           timings_ms=_timings_ms(t0, t1, t2, t3, t4),
+                           warnings=check.warnings, left_lines=feats.left_lines,
+                           right_lines=feats.right_lines, warm_start=step.warm_start,
+                           prediction=step.prediction, candidates=step.candidates,
+                           fast_motion=fast)
+
+    def _estimate(self, feats: Features, shape: tuple[int, int],
+                  motions: tuple[np.ndarray, np.ndarray] | None, fast: bool) -> _Step:
+        """Estimate this frame's plane as the lock state says: warm start, then search."""
+        height, width = shape
+        size = (width, height)
+        # One two-step problem per frame: the right set's KD-tree, line matcher and refiner
+        # serve every start tried on it (warm, wide, best so far, initial, prior candidates).
+        problem = self._problem(feats)
+        step = _Step()
+        if self._state != SEARCHING:
+            self._track_or_lock(step, feats, problem, size, motions, fast)
+        if self._state == SEARCHING:
+            self._search_step(step, feats, problem, size, motions)
+        return step
+
+    def _publish(self, step: _Step, left: np.ndarray, right: np.ndarray, feats: Features
+                 ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray]:
+        """Return the frame's estimate, homography and mask; keep an accepted plane."""
+        estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
+        if step.accepted:
+            h = estimate.homography
+            mask = plane_mask(left, right, h, self.config.mask)
+            self._last_h = h
+            self._last_energy_per_point = estimate.final_energy / max(feats.n_left, 1)
+            self.stats.succeeded += 1
+        else:
+            h = None
+            mask = np.zeros(left.shape, np.uint8)
+            self.stats.failed += 1
+        return estimate, h, mask
 
     def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
                  warnings: tuple[str, ...], t0: float, fast: bool) -> FrameResult:
@@ -303,10 +255,10 @@ class PlanePipeline:
                            warnings=warnings, fast_motion=fast)
 
     def _tracking_points(self, left: np.ndarray, right: np.ndarray,
-                         feats: tuple[np.ndarray, ...]) -> tuple[np.ndarray, np.ndarray]:
+                         feats: Features) -> tuple[np.ndarray, np.ndarray]:
         """Return the corners to track from this frame (detected if only lines are used)."""
         if not self.config.tracking.enabled or self.config.features.kind != 'lines':
-            return feats[0], feats[1]
+            return feats.left_points, feats.right_points
         return (detect_corners(left, self.config.features),
                 detect_corners(right, self.config.features))
 
@@ -335,12 +287,12 @@ class PlanePipeline:
         return predict_plane_homography(h, motions[0], motions[1])
 
     # --- Locked and tracking ---------------------------------------------------------------
-    def _track_or_lock(self, step: _Step, feats: tuple[np.ndarray, ...],
+    def _track_or_lock(self, step: _Step, feats: Features, problem: TwoStep | FailedEstimate,
                        size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
                        fast: bool) -> None:
         assert self._last_h is not None
         prediction = self._propagate(self._last_h, motions)
-        if prediction is not None and self._suspicious_bounds(prediction, size, count=False):
+        if prediction is not None and self._bounds_reason(prediction, size, count=False):
             prediction = None
         step.prediction = prediction
         if prediction is not None:
@@ -349,18 +301,18 @@ class PlanePipeline:
         # is stale, and a stale start can slide into a look-alike.
         starts = [('prediction', prediction) if prediction is not None
                   else ('last', self._last_h)]
-        reason = self._too_few(feats)
+        reason = self._too_few_reason(feats)
         for name, init in starts if not reason else ():
             wide = fast and prediction is None
-            estimate = self._warm_estimate(feats, init, wide)
+            estimate = self._warm_estimate(problem, init, wide)
             step.estimate, step.warm_start = estimate, name
             if not estimate.ok:
                 reason = estimate.reason
                 continue
             # A fast head (joint input) may change the energy legitimately: no energy check.
-            reason = self._suspicious(estimate, _n_left(feats), size, energy=not fast)
+            reason = self._suspicion_reason(estimate, feats.n_left, size, energy=not fast)
             if not reason:
-                reason = self._input_problem(estimate, feats[0], size)
+                reason = self._input_problem(estimate, feats.left_points, size)
             if not reason:
                 step.accepted = True
                 self._state = LOCKED
@@ -382,25 +334,28 @@ class PlanePipeline:
             return
         self._start_search()
 
-    def _warm_estimate(self, feats: tuple[np.ndarray, ...], init: np.ndarray,
+    def _warm_estimate(self, problem: TwoStep | FailedEstimate, init: np.ndarray,
                        wide: bool) -> PlaneEstimate | FailedEstimate:
+        if isinstance(problem, FailedEstimate):
+            return problem
         cfg = self.config
-        lines = self._lines(feats)
         warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
                                                        cfg.pipeline.warm_gnc_start_px))
         if wide:
             # Fast head and no prediction: a first pass with a wide basin.
             wide_options = replace(cfg.estimator, threshold_px=min(
                 200.0, _WIDE_BASIN_FACTOR * cfg.estimator.threshold_px))
-            first = estimate_plane(feats[0], feats[1], init, wide_options, **lines)
+            first = problem.estimate(init, wide_options)
             if first.ok:
                 init = first.homography
-        return estimate_plane(feats[0], feats[1], init, warm, **lines)
+        return problem.estimate(init, warm)
 
-    def _lines(self, feats: tuple[np.ndarray, ...]) -> dict[str, np.ndarray]:
-        if self.config.features.kind == 'points':
-            return {}
-        return {'left_lines': feats[2], 'right_lines': feats[3]}
+    def _problem(self, feats: Features) -> TwoStep | FailedEstimate:
+        """Return the two-step iteration over this frame's features, or why there is none."""
+        lines = self.config.features.kind != 'points'
+        return TwoStep.from_features(
+            feats.left_points, feats.right_points, feats.left_lines if lines else None,
+            feats.right_lines if lines else None, self.config.estimator.line_weight)
 
     # --- Searching -------------------------------------------------------------------------
     def _start_search(self) -> None:
@@ -410,7 +365,7 @@ class PlanePipeline:
         self._last_energy_per_point = None
         self._search = None
 
-    def _search_step(self, step: _Step, feats: tuple[np.ndarray, ...],
+    def _search_step(self, step: _Step, feats: Features, problem: TwoStep | FailedEstimate,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
                      ) -> None:
         """Refine the next few prior candidates; accept the best once enough were tried."""
@@ -420,51 +375,34 @@ class PlanePipeline:
             self._search = _Search()
             self.stats.reinitialisations += 1
         search = self._search
-        left_pts, right_pts = feats[0], feats[1]
-        lines = self._lines(feats)
-        reason = self._too_few(feats)
+        reason = self._too_few_reason(feats)
         if reason:
             step.reason = reason
             return
         budget = cfg.pipeline.search_candidates_per_frame
-        best: PlaneEstimate | FailedEstimate | None = None
-        if search.best is not None:
-            # The best so far, moved to this frame and refined on its points.
-            start = self._propagate(search.best, motions)
-            best = self._warm_estimate(feats, start if start is not None else search.best,
-                                       False)
-            if best.ok and self._rejected(best, feats, size):
-                best = None
-        rejection = ''
+        best = self._best_so_far(search, problem, feats, size, motions)
         if cfg.initial_homography and not search.initial_tried:
             search.initial_tried = True
             budget -= 1
             step.candidates += 1
-            first = estimate_plane(left_pts, right_pts, np.array(cfg.initial_homography),
-                                   cfg.estimator, **lines)
-            if first.ok and not self._rejected(first, feats, size):
+            first = problem if isinstance(problem, FailedEstimate) else problem.estimate(
+                as_homography(cfg.initial_homography, 'initial_homography'), cfg.estimator)
+            if first.ok and not self._rejection_reason(first, feats, size):
                 step.warm_start = 'initial'
                 self._accept_search(step, first)
                 return
+        if isinstance(problem, FailedEstimate):
+            step.reason = problem.reason
+            return
         candidates = self._candidates(size)
         limit = min(cfg.prior.refine_best, candidates.shape[0])
-        costs = prior_screening(left_pts, right_pts, candidates, cfg.prior.screen_threshold_px,
-                                line_weight=cfg.estimator.line_weight, **lines)
-        if isinstance(costs, str):
-            step.reason = costs
-            return
-        order = [int(i) for i in np.argsort(costs, kind='stable') if int(i) not in search.tried]
-        for index in order[:max(0, min(budget, limit - len(search.tried)))]:
-            search.tried.add(index)
-            step.candidates += 1
-            result = estimate_plane(left_pts, right_pts, candidates[index], cfg.estimator,
-                                    **lines)
-            problem = self._rejected(result, feats, size) if result.ok else ''
-            if problem:
-                rejection = problem
-                continue
-            if best is None or better_estimate(result, best):
-                best = result
+        prior_search = PriorSearch(problem, candidates, cfg.prior.screen_threshold_px)
+        chosen = prior_search.ranked(search.tried)[:max(0, min(budget, limit - len(search.tried)))]
+        search.tried.update(chosen)
+        step.candidates += len(chosen)
+        best, rejection = prior_search.refine(
+            chosen, cfg.estimator, lambda estimate: self._rejection_reason(estimate, feats, size),
+            best)
         self.stats.candidates += step.candidates
         step.warm_start = 'search'
         step.estimate = best
@@ -473,6 +411,23 @@ class PlanePipeline:
             step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
                            'refined')
             return
+        self._end_search(step, best, rejection)
+
+    def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,
+                     size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
+                     ) -> PlaneEstimate | FailedEstimate | None:
+        """Return the search's best so far, moved to this frame and refined on its features."""
+        if search.best is None:
+            return None
+        start = self._propagate(search.best, motions)
+        best = self._warm_estimate(problem, start if start is not None else search.best, False)
+        if best.ok and self._rejection_reason(best, feats, size):
+            return None
+        return best
+
+    def _end_search(self, step: _Step, best: PlaneEstimate | FailedEstimate | None,
+                    rejection: str) -> None:
+        """Accept the search's best plane, or fail and start again with the next frame."""
         if best is not None and best.ok:
             self._accept_search(step, best)
             return
@@ -497,22 +452,20 @@ class PlanePipeline:
         return self._candidates_cache[size]
 
     # --- Checks ----------------------------------------------------------------------------
-    def _too_few(self, feats: tuple[np.ndarray, ...]) -> str:
+    def _too_few_reason(self, feats: Features) -> str:
+        """Return why the features are too few to try an estimate ('' if they are enough)."""
         min_inliers = self.config.estimator.min_inliers
-        n_left = _n_left(feats)
-        n_right = feats[1].shape[0] + feats[3].shape[0]
-        reason = ''
-        if n_left < min_inliers:
-            reason = f'too few left features: {n_left} < min_inliers {min_inliers}'
-        elif n_right < 4:
-            reason = f'too few right features: {n_right}'
-        return reason
+        if feats.n_left < min_inliers:
+            return f'too few left features: {feats.n_left} < min_inliers {min_inliers}'
+        if feats.n_right < 4:
+            return f'too few right features: {feats.n_right}'
+        return ''
 
-    def _rejected(self, estimate: PlaneEstimate, feats: tuple[np.ndarray, ...],
-                  size: tuple[int, int]) -> str:
+    def _rejection_reason(self, estimate: PlaneEstimate, feats: Features,
+                          size: tuple[int, int]) -> str:
         """Return why a search result must not be accepted ('' if it may be; not counted)."""
-        return (self._suspicious_bounds(estimate.homography, size, count=False)
-                or self._input_problem(estimate, feats[0], size, count=False))
+        return (self._bounds_reason(estimate.homography, size, count=False)
+                or self._input_problem(estimate, feats.left_points, size, count=False))
 
     def _count_rejection(self, reason: str) -> None:
         """Count a search's final rejection reason once, under its kind."""
@@ -547,8 +500,8 @@ class PlanePipeline:
                         'collinear or packed in one patch, they do not constrain the plane')
         return ''
 
-    def _suspicious(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
-                    energy: bool = True) -> str:
+    def _suspicion_reason(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
+                          energy: bool = True) -> str:
         """Return why an estimate should not be trusted ('' if it can be)."""
         cfg = self.config.pipeline
         if energy and self._last_energy_per_point is not None:
@@ -557,10 +510,11 @@ class PlanePipeline:
             if per_point > limit:
                 return (f'energy jump: {per_point:.3g} per point > {cfg.max_energy_ratio} x '
                         f'last {self._last_energy_per_point:.3g}')
-        return self._suspicious_bounds(estimate.homography, size)
+        return self._bounds_reason(estimate.homography, size)
 
-    def _suspicious_bounds(self, homography: np.ndarray, size: tuple[int, int],
-                           count: bool = True) -> str:
+    def _bounds_reason(self, homography: np.ndarray, size: tuple[int, int],
+                       count: bool = True) -> str:
+        """Return why a homography is outside the prior ('' if it is inside or unchecked)."""
         if self.config.pipeline.check_prior_bounds:
             low, high = self._prior_bounds(size)
             corners = _image_corners(*size)
@@ -596,33 +550,7 @@ class _Step:
     keep_previous: bool = False
 
 
-def debug_overlay(left: np.ndarray, result: FrameResult) -> np.ndarray:
-    """Return the (H, W, 3) uint8 RGB debug image of a frame: mask tint, features.
-
-    Inlier corners are cyan circles and inlier segments cyan lines; the rest magenta (all of
-    them when no plane was found).
-
-    Args:
-        left: (H, W) uint8 left image of the frame.
-        result: The pipeline's result for it.
-
-    """
-    pts = result.left_points
-    segs = result.left_lines
-    est = result.estimate
-    if result.ok and pts.shape[0] == est.inliers.shape[0]:
-        inl = est.inliers
-    else:
-        inl = np.zeros(pts.shape[0], bool)
-    if result.ok and segs.shape[0] == est.line_inliers.shape[0]:
-        line_inl = est.line_inliers
-    else:
-        line_inl = np.zeros(segs.shape[0], bool)
-    return overlay(left, result.mask, pts[inl], pts[~inl], segs[line_inl], segs[~line_inl])
-
-
-def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig) -> Features:
     """Return left and right corners and segments, as ``features.kind`` asks."""
     kind = cfg.features.kind
     none_pts = np.zeros((0, 2))
@@ -637,12 +565,21 @@ def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig
     else:
         left_seg = detect_lines(left, cfg.features)
         right_seg = detect_lines(right, cfg.features)
-    return left_pts, right_pts, left_seg, right_seg
+    return Features(left_pts, right_pts, left_seg, right_seg)
 
 
-def _n_left(feats: tuple[np.ndarray, ...]) -> int:
-    """Return the number of left features (corners plus segments)."""
-    return int(feats[0].shape[0] + feats[2].shape[0])
+def _timings_ms(t0: float, t1: float, t2: float, t3: float, t4: float) -> dict[str, float]:
+    """Return the milliseconds of the features, tracking, estimate and mask, and the total."""
+    return {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
+            'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3), 'total': 1e3 * (t4 - t0)}
+
+
+def _check_frame(left: np.ndarray, right: np.ndarray, joint_speed: float | None) -> None:
+    """Raise ValueError for an image that is not 2-D uint8 or a non-finite joint speed."""
+    check_gray(left, 'left')
+    check_gray(right, 'right')
+    if joint_speed is not None and not math.isfinite(joint_speed):
+        raise ValueError(f'joint_speed must be finite, got {joint_speed!r}')
 
 
 def _bounds_prior(prior: PriorConfig) -> PriorConfig:

@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
-from domplane_ros.core.estimator import estimate_plane, FailedEstimate, PlaneEstimate
-from domplane_ros.core.homography import apply_homography
+from domplane_ros.core.estimator import estimate_plane, FailedEstimate, PlaneEstimate, TwoStep
+from domplane_ros.core.homography import apply_homography, fit_homography
 from domplane_ros.core.potentials import POTENTIALS
-from domplane_ros.core.prior import plane_homography
+from domplane_ros.core.prior import plane_homography, prior_candidates, PriorSearch
 from domplane_ros.sim.synthetic import displace_homography, plane_error_px, point_scene
 from hypothesis import given, HealthCheck, settings, strategies as st
 import numpy as np
@@ -240,3 +240,36 @@ def test_options_object_and_overrides_agree():
                        EstimatorConfig(potential='huber', lambda_weight=0.5))
     b = estimate_plane(scene.left, scene.right, h0, potential='huber', lambda_weight=0.5)
     np.testing.assert_array_equal(a.homography, b.homography)
+
+
+# --- One prior search, one failure type.
+def test_prior_search_over_frames_equals_the_one_shot_search():
+    prior = PriorConfig(focal_px=(500, 800), baseline_over_height=(0.08, 0.3),
+                        tilt_deg=(15, 45), vergence_deg=(-1, 3), refine_best=4)
+    scene = point_scene(np.random.default_rng(3), 300)
+    one_shot = estimate_plane(scene.left, scene.right, prior=prior, image_size=(640, 480))
+    # The pipeline's way: the same search, two candidates at a time, the best carried on.
+    problem = TwoStep.from_features(scene.left, scene.right)
+    search = PriorSearch(problem, prior_candidates(prior, 640, 480),
+                         prior.screen_threshold_px)
+    order = search.ranked()
+    assert order[:2] + search.ranked(skip=set(order[:2]))[:2] == order[:4]
+    best, rejected = search.refine(order[:2], EstimatorConfig())
+    best, rejected = search.refine(order[2:4], EstimatorConfig(), best=best)
+    assert one_shot.ok and best.ok and not rejected
+    assert one_shot.candidates_tried == 4
+    np.testing.assert_array_equal(best.homography, one_shot.homography)
+    # A rejected candidate is dropped and its reason kept.
+    best, rejected = search.refine(order[:4], EstimatorConfig(), lambda est: 'no')
+    assert best is None and rejected == 'no'
+
+
+def test_every_failure_is_one_failed_estimate_value():
+    collinear = np.c_[np.arange(10.0), np.arange(10.0)]
+    failures = [fit_homography(collinear, collinear),
+                estimate_plane(collinear, collinear, np.eye(3)),
+                TwoStep.from_features(collinear, collinear)]
+    for failure in failures:
+        assert isinstance(failure, FailedEstimate)
+        assert not failure and not failure.ok and not failure.converged
+        assert 'collinear' in failure.reason and str(failure) == failure.reason

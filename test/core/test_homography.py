@@ -2,9 +2,10 @@
 
 from __future__ import annotations
 
-from domplane_ros.core.homography import (apply_homography, FailedEstimation, fit_homography,
+from domplane_ros.core.homography import (apply_homography, fit_homography,
                                           fit_homography_dlt, NormalisedRefiner,
                                           refine_homography, transfer_error)
+from domplane_ros.core.result import FailedEstimate
 from domplane_ros.sim.synthetic import random_plane_homography
 from hypothesis import given, settings, strategies as st
 import numpy as np
@@ -81,7 +82,7 @@ def test_zero_weights_remove_outliers():
 def test_degenerate_input_is_a_failure_value(src, dst, reason):
     for fit in (fit_homography_dlt, fit_homography):
         result = fit(src, dst)
-        assert isinstance(result, FailedEstimation)
+        assert isinstance(result, FailedEstimate)
         assert not result
         assert reason in result.reason
 

@@ -15,7 +15,7 @@ from domplane_ros.sim.synthetic import (displace_homography, line_scene, plane_e
                                         point_scene)
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.tools.evaluate import one_shot_search, RENDERED_PRIOR
-from hypothesis import given, HealthCheck, settings, strategies as st
+from hypothesis import assume, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
@@ -146,6 +146,10 @@ def test_energy_trace_is_non_increasing_for_lines_and_joint(
         seed, potential, lam, threshold, outliers, displacement, n, joint, weight):
     rng = np.random.default_rng(seed)
     scene = line_scene(rng, n, outlier_fraction=outliers, missing_fraction=0.1)
+    # The guarantee is about the iteration: segment sets that cannot fix H (fewer than 4
+    # after the missing ones, e.g. n = 6, seed 484) fail or are left out before it runs
+    # (test_lines_reason_for_degenerate_sets, test_degenerate_lines_give_failure_values).
+    assume(not lines_reason(scene.left, 'left') and not lines_reason(scene.right, 'right'))
     points = point_scene(rng, n, outlier_fraction=outliers, homography=scene.homography)
     h0 = displace_homography(scene.homography, displacement, rng)
     left, right = (points.left, points.right) if joint else (None, None)

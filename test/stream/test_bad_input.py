@@ -256,7 +256,10 @@ def _fake_estimate(h):
 ])
 def test_non_finite_or_out_of_prior_homography_is_never_published(
         scene, monkeypatch, h, needle, counter):
-    monkeypatch.setattr(pipeline_module, 'estimate_plane', lambda *a, **k: _fake_estimate(h))
+    # Every start the pipeline tries (warm, best so far, prior candidates) runs through
+    # TwoStep.estimate.
+    monkeypatch.setattr(pipeline_module.TwoStep, 'estimate',
+                        lambda self, *a, **k: _fake_estimate(h))
     pipeline = one_shot_pipeline()
     result = pipeline.process(scene.left, scene.right, STAMP0)
     assert_failed(result, needle)

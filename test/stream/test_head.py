@@ -10,6 +10,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.core.estimator import TwoStep
 from domplane_ros.sim.scene import head_sequence, HeadMotion
 from domplane_ros.stream.pipeline import LOCKED, PlanePipeline, SEARCHING, TRACKING
 from domplane_ros.tools.evaluate_head import dropout_frames, floor_points, method_config
@@ -166,3 +167,19 @@ def test_relock_runs_counts_frames_between_losses_and_relocks():
                        [False, True, True, False, False]) == [1]
     assert relock_runs([True, False, True], [False, True, False]) == [0]
     assert dropout_frames(10, 4, (1, 2)) == {2, 6, 7}
+
+
+def test_one_two_step_problem_per_frame(fast_sequence, monkeypatch):
+    """The search structures (KD-tree, refiner) are built once per frame, not per start."""
+    built = []
+    original = TwoStep.from_features.__func__
+
+    def counting(cls, *args, **kwargs):
+        built.append(1)
+        return original(cls, *args, **kwargs)
+
+    monkeypatch.setattr(TwoStep, 'from_features', classmethod(counting))
+    pipeline = PlanePipeline()
+    results = _run(pipeline, fast_sequence[:6])
+    assert any(r.candidates > 1 for r, _ in results)  # several starts tried in one frame
+    assert len(built) == 6

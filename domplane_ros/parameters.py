@@ -1,0 +1,354 @@
+"""The parameter table: every tunable's name, default, type, range and description.
+
+:data:`PARAMETERS` is the one table the node declares its ROS parameters from (descriptors
+with ranges), the config dataclasses of :mod:`domplane_ros.config` validate against, and the
+README's parameter table and the default params file are generated from.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from typing import Any, Mapping
+
+from domplane_ros.errors import ConfigError
+
+POTENTIAL_NAMES = ('least_squares', 'truncated_quadratic', 'huber', 'geman_mcclure')
+FEATURE_KINDS = ('points', 'lines', 'both')
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One ROS parameter: name, default, type and admissible values.
+
+    ``kind`` is one of ``'float'``, ``'int'``, ``'bool'``, ``'str'``, ``'range'`` (two
+    floats ``[min, max]`` with ``min <= max``), ``'floats'`` (a list of floats whose allowed
+    lengths are given by ``lengths``).
+    """
+
+    name: str
+    default: Any
+    kind: str
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] | None = None
+    lengths: tuple[int, ...] | None = None
+
+
+PARAMETERS: tuple[ParamSpec, ...] = (
+    # Features.
+    ParamSpec('features.max_points', 400, 'int',
+              'Maximum number of corner points detected per image.', 8, 5000),
+    ParamSpec('features.quality_level', 0.01, 'float',
+              'Corner quality relative to the strongest corner (cv2.goodFeaturesToTrack).',
+              1e-4, 1.0),
+    ParamSpec('features.min_distance_px', 8.0, 'float',
+              'Minimum distance between two detected corners, in pixels.', 1.0, 200.0),
+    ParamSpec('features.block_size', 5, 'int',
+              'Neighbourhood size of the corner detector, in pixels.', 3, 31),
+    ParamSpec('features.grid_rows', 4, 'int',
+              'Rows of the detection grid; each cell keeps its share of the corners.', 1, 32),
+    ParamSpec('features.grid_cols', 4, 'int',
+              'Columns of the detection grid.', 1, 32),
+    ParamSpec('features.roi', [0.0, 0.0, 1.0, 1.0], 'floats',
+              'Region of interest in the left image as fractions [x0, y0, x1, y1] '
+              '(0..1, x0 < x1, y0 < y1).', 0.0, 1.0, lengths=(4,)),
+    ParamSpec('features.kind', 'points', 'str',
+              'Features the plane is estimated from: points (corners), lines (straight line '
+              'segments) or both.', choices=FEATURE_KINDS),
+    ParamSpec('features.max_lines', 150, 'int',
+              'Maximum number of line segments detected per image (lines and both).', 4, 2000),
+    ParamSpec('features.min_line_length_px', 25.0, 'float',
+              'Line segments shorter than this are dropped, in pixels.', 4.0, 1000.0),
+    ParamSpec('features.line_scale', 0.8, 'float',
+              'Image scale at which the line segment detector runs (LSD scale; smaller is '
+              'faster and less precise).', 0.2, 1.0),
+    # Estimator.
+    ParamSpec('estimator.potential', 'truncated_quadratic', 'str',
+              'Robust potential: least_squares, truncated_quadratic, huber or '
+              'geman_mcclure (graduated non-convexity).', choices=POTENTIAL_NAMES),
+    ParamSpec('estimator.lambda_weight', 0.8, 'float',
+              'Interpolation weight lambda in (0, 1): how far an auxiliary point moves from '
+              'the prediction toward its closest point.', 0.01, 0.99),
+    ParamSpec('estimator.threshold_px', 3.0, 'float',
+              'Robust threshold (truncation, Huber corner, Geman-McClure scale) in pixels; '
+              'points farther than this from every partner are off the plane.', 0.1, 200.0),
+    ParamSpec('estimator.line_weight', 3.0, 'float',
+              'Weight of a line segment relative to a point in the joint energy (features.kind '
+              'both).', 0.01, 100.0),
+    ParamSpec('estimator.gnc_start_px', 24.0, 'float',
+              'Geman-McClure only: initial (wide) scale of graduated non-convexity, pixels.',
+              0.1, 500.0),
+    ParamSpec('estimator.gnc_factor', 0.5, 'float',
+              'Geman-McClure only: factor by which the scale shrinks per stage.', 0.05, 0.95),
+    ParamSpec('estimator.max_iterations', 60, 'int',
+              'Iteration cap of one two-step run (per GNC stage).', 1, 10000),
+    ParamSpec('estimator.tolerance_px', 0.05, 'float',
+              'Convergence when no prediction moves more than this, in pixels.', 1e-6, 10.0),
+    ParamSpec('estimator.energy_tolerance', 1e-7, 'float',
+              'Convergence when the relative energy decrease falls below this.', 0.0, 1.0),
+    ParamSpec('estimator.euclidean_refinement', True, 'bool',
+              'After convergence, fit H to the inliers and their closest points by '
+              'Gauss-Newton on the transfer error (sub-pixel accuracy).'),
+    ParamSpec('estimator.min_inliers', 12, 'int',
+              'Fewer inliers than this is a failed estimate.', 4, 100000),
+    # Prior.
+    ParamSpec('prior.focal_px', [400.0, 900.0], 'range',
+              'Focal length range [min, max] in pixels.', 1.0, 1e5),
+    ParamSpec('prior.baseline_over_height', [0.05, 0.4], 'range',
+              'Stereo baseline divided by camera height above the plane, [min, max].',
+              1e-4, 100.0),
+    ParamSpec('prior.tilt_deg', [10.0, 50.0], 'range',
+              'Camera tilt toward the plane [min, max] in degrees (positive looks down).',
+              -89.0, 89.0),
+    ParamSpec('prior.vergence_deg', [-2.0, 4.0], 'range',
+              "Vergence: the right camera's yaw toward the left camera, [min, max] degrees.",
+              -45.0, 45.0),
+    ParamSpec('prior.samples', 5, 'int',
+              'Samples per prior range for the candidate grid (samples^4 candidates).', 1, 12),
+    ParamSpec('prior.refine_best', 6, 'int',
+              'Candidates (best by screening energy) that get the full iteration.', 1, 100),
+    ParamSpec('prior.screen_threshold_px', 12.0, 'float',
+              'Truncation of the cheap closest-point screening energy, in pixels.', 0.5, 500.0),
+    ParamSpec('initial_homography', [], 'floats',
+              'Optional initial homography, 9 values row-major, left pixel to right pixel; '
+              'empty means search the prior.', lengths=(0, 9)),
+    # Mask.
+    ParamSpec('mask.scale', 0.5, 'float',
+              'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),
+    ParamSpec('mask.window_px', 7, 'int',
+              'Side of the window of the normalised comparison, pixels at mask scale.', 3, 31),
+    ParamSpec('mask.ncc_threshold', 0.8, 'float',
+              'Local normalised correlation above which a pixel is on the plane.', -1.0, 1.0),
+    ParamSpec('mask.min_texture', 3.0, 'float',
+              'Local grey-level standard deviation below which a pixel is unknown.', 0.0, 255.0),
+    ParamSpec('mask.morph_px', 5, 'int',
+              'Size of the morphological clean-up, pixels at mask scale (0 disables).', 0, 51),
+    # Pipeline.
+    ParamSpec('pipeline.max_energy_ratio', 4.0, 'float',
+              'A warm-started estimate whose energy per point exceeds this multiple of the '
+              "last good one is rejected (the 'tracking' state, then the prior search).",
+              1.0, 1e6),
+    ParamSpec('pipeline.warm_gnc_start_px', 6.0, 'float',
+              'Geman-McClure only: initial GNC scale when warm-starting from the last frame '
+              '(the wide estimator.gnc_start_px is used after a re-initialisation).',
+              0.1, 500.0),
+    ParamSpec('pipeline.check_prior_bounds', True, 'bool',
+              'Reject homographies that move the image corners outside what the prior allows.'),
+    ParamSpec('pipeline.min_inlier_spread', 0.02, 'float',
+              'Smallest convex-hull area of the inliers, as a fraction of the features.roi '
+              'area; collinear inliers or inliers in one small patch leave the homography '
+              'unconstrained and fail the frame (0 disables).', 0.0, 1.0),
+    ParamSpec('pipeline.max_clipped_fraction', 0.6, 'float',
+              'A frame with more than this fraction of black (grey <= 2) or saturated '
+              '(grey >= 253) pixels is refused (1 disables).', 0.01, 1.0),
+    ParamSpec('pipeline.max_stamp_jump_s', 10.0, 'float',
+              'A pair stamped more than this many seconds after the last one drops the warm '
+              'start (as a stamp going backwards does).', 0.001, 1e6),
+    ParamSpec('pipeline.max_tracking_frames', 2, 'int',
+              "Frames in the 'tracking' state (the last homography carried forward through "
+              "the cameras' tracked motion) after a failed or suspicious estimate before the "
+              'prior search starts.', 0, 100),
+    ParamSpec('pipeline.search_candidates_per_frame', 3, 'int',
+              'Prior candidates refined per frame during a search; a search of '
+              'prior.refine_best candidates is spread over frames, keeping the best so far.',
+              1, 100),
+    ParamSpec('pipeline.fast_joint_velocity', 0.5, 'float',
+              'Head joint speed (largest absolute velocity in the joint states, rad/s) above '
+              'which a big change is expected: no energy-jump check, and a wide warm-start '
+              'basin when tracking gives no prediction.', 0.0, 1e3),
+    # Temporal prediction.
+    ParamSpec('tracking.enabled', True, 'bool',
+              "Warm-start from the last homography moved through both cameras' tracked "
+              'frame-to-frame motion (H_t ~ M_right H_{t-1} M_left^-1); false warm-starts '
+              'from the last homography as is.'),
+    ParamSpec('tracking.max_points', 150, 'int',
+              "Most corners tracked per camera (the previous frame's first, i.e. strongest "
+              'per grid cell).',
+              8, 5000),
+    ParamSpec('tracking.window_px', 15, 'int',
+              'Side of the pyramidal Lucas-Kanade window, pixels.', 5, 101),
+    ParamSpec('tracking.pyramid_levels', 3, 'int',
+              'Pyramid levels of the Lucas-Kanade tracker above full resolution.', 0, 8),
+    ParamSpec('tracking.forward_backward_px', 1.0, 'float',
+              'Largest forward-backward round-trip error of a kept track, pixels.',
+              0.01, 50.0),
+    ParamSpec('tracking.min_tracks', 20, 'int',
+              'Fewer kept tracks than this in a camera: no prediction this frame.', 4, 10000),
+    ParamSpec('tracking.min_inlier_ratio', 0.5, 'float',
+              "Share of a camera's tracks that must fit its motion homography (MAGSAC++).",
+              0.0, 1.0),
+    ParamSpec('tracking.threshold_px', 2.0, 'float',
+              'Inlier threshold of the robust camera-motion fit, pixels.', 0.1, 50.0),
+    # Optional head input.
+    ParamSpec('head.joint_states_topic', '', 'str',
+              'sensor_msgs/JointState topic of the head (e.g. head/joint_states); empty: no '
+              'joint input. Fast joints hint at a big change (see '
+              'pipeline.fast_joint_velocity).'),
+    ParamSpec('head.max_age_s', 0.5, 'float',
+              'Joint states older than this (receive time) are ignored, seconds.', 0.0, 60.0),
+    # Synchroniser and transport.
+    ParamSpec('sync.slop_s', 0.01, 'float',
+              'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
+    ParamSpec('sync.queue_size', 5, 'int',
+              'Per-camera queue of the synchroniser; the oldest frame is dropped when full.',
+              1, 1000),
+    ParamSpec('qos.reliable', False, 'bool',
+              'Subscribe with reliable QoS instead of sensor-data (best effort).'),
+    ParamSpec('qos.depth', 2, 'int', 'Subscription queue depth.', 1, 100),
+    ParamSpec('diagnostics.period_s', 1.0, 'float',
+              'Period of the /diagnostics status, seconds.', 0.05, 60.0),
+    ParamSpec('diagnostics.silence_s', 1.0, 'float',
+              'A camera that sends no image for this long is reported: /diagnostics WARN '
+              'naming its topic, and a throttled log warning.', 0.01, 3600.0),
+)
+
+PARAMETERS_BY_NAME: dict[str, ParamSpec] = {spec.name: spec for spec in PARAMETERS}
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def check_value(spec: ParamSpec, value: Any) -> Any:
+    """Validate one parameter value against its spec and return it normalised.
+
+    Args:
+        spec: The parameter's specification.
+        value: The value as read from YAML or a ROS parameter.
+
+    Returns:
+        The value converted to its canonical Python type (lists become lists of floats).
+
+    Raises:
+        ConfigError: If the type is wrong or the value is outside its admissible set; the
+            message names the parameter.
+
+    """
+    name = spec.name
+    if spec.kind == 'bool':
+        if not isinstance(value, bool):
+            raise ConfigError(f'parameter {name!r}: expected a bool, got {value!r}')
+        return value
+    if spec.kind == 'str':
+        if not isinstance(value, str):
+            raise ConfigError(f'parameter {name!r}: expected a string, got {value!r}')
+        if spec.choices is not None and value not in spec.choices:
+            raise ConfigError(
+                f'parameter {name!r}: {value!r} is not one of {", ".join(spec.choices)}')
+        return value
+    if spec.kind == 'int':
+        if not isinstance(value, int) or isinstance(value, bool):
+            raise ConfigError(f'parameter {name!r}: expected an integer, got {value!r}')
+        _check_bounds(spec, value)
+        return int(value)
+    if spec.kind == 'float':
+        if not _is_number(value) or not math.isfinite(value):
+            raise ConfigError(f'parameter {name!r}: expected a finite number, got {value!r}')
+        _check_bounds(spec, float(value))
+        return float(value)
+    # Lists: 'range' and 'floats'.
+    if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
+        raise ConfigError(f'parameter {name!r}: expected a list of numbers, got {value!r}')
+    items = list(value)
+    if not all(_is_number(v) and math.isfinite(v) for v in items):
+        raise ConfigError(f'parameter {name!r}: expected finite numbers, got {items!r}')
+    items = [float(v) for v in items]
+    if spec.kind == 'range':
+        if len(items) != 2:
+            raise ConfigError(f'parameter {name!r}: expected [min, max], got {items!r}')
+        if items[0] > items[1]:
+            raise ConfigError(
+                f'parameter {name!r}: inverted range [min, max] = {items!r} (min > max)')
+        for v in items:
+            _check_bounds(spec, v)
+        return items
+    if spec.lengths is not None and len(items) not in spec.lengths:
+        allowed = ' or '.join(str(n) for n in spec.lengths)
+        raise ConfigError(
+            f'parameter {name!r}: expected {allowed} values, got {len(items)}')
+    for v in items:
+        _check_bounds(spec, v)
+    return items
+
+
+def _check_bounds(spec: ParamSpec, value: float) -> None:
+    if spec.low is not None and value < spec.low:
+        raise ConfigError(
+            f'parameter {spec.name!r}: {value!r} is below the minimum {spec.low!r}')
+    if spec.high is not None and value > spec.high:
+        raise ConfigError(
+            f'parameter {spec.name!r}: {value!r} is above the maximum {spec.high!r}')
+
+
+def flatten_params(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
+    """Flatten a nested parameter mapping into dotted names.
+
+    ``{'prior': {'tilt_deg': [0, 5]}}`` and ``{'prior.tilt_deg': [0, 5]}`` both give
+    ``{'prior.tilt_deg': [0, 5]}``.
+
+    Args:
+        params: The ``ros__parameters`` block, nested or already dotted.
+        prefix: Name prefix used for recursion.
+
+    Returns:
+        A flat dict from dotted parameter name to value.
+
+    Raises:
+        ConfigError: If ``params`` is not a mapping.
+
+    """
+    if not isinstance(params, Mapping):
+        raise ConfigError(f'parameters must be a mapping, got {type(params).__name__}')
+    flat: dict[str, Any] = {}
+    for key, value in params.items():
+        name = f'{prefix}{key}'
+        if isinstance(value, Mapping):
+            flat.update(flatten_params(value, prefix=name + '.'))
+        else:
+            flat[name] = value
+    return flat
+
+
+def default_params_yaml(node_name: str = 'plane_node') -> str:
+    """Return a ROS 2 parameters file with every parameter at its default, commented."""
+    lines = [f'{node_name}:', '  ros__parameters:']
+    for spec in PARAMETERS:
+        value = spec.default
+        if isinstance(value, bool):
+            text = 'true' if value else 'false'
+        elif isinstance(value, str):
+            text = f"'{value}'"
+        elif isinstance(value, list):
+            text = '[' + ', '.join(_yaml_float(v) for v in value) + ']'
+        elif isinstance(value, float):
+            text = _yaml_float(value)
+        else:
+            text = repr(value)
+        lines.append(f'    # {spec.description}')
+        lines.append(f'    {spec.name}: {text}')
+    return '\n'.join(lines) + '\n'
+
+
+def _yaml_float(value: float) -> str:
+    """Format a float so that YAML 1.1 readers (PyYAML) parse it as a float, not a string."""
+    text = repr(float(value))
+    if 'e' in text and '.' not in text.split('e')[0]:
+        mantissa, exponent = text.split('e')
+        text = f'{mantissa}.0e{exponent}'
+    return text
+
+
+def parameters_markdown() -> str:
+    """Return the README's parameter table."""
+    rows = ['| parameter | default | range | description |', '|---|---|---|---|']
+    for spec in PARAMETERS:
+        if spec.choices:
+            rng = ', '.join(spec.choices)
+        elif spec.low is not None and spec.high is not None:
+            rng = f'{spec.low:g} .. {spec.high:g}'
+        else:
+            rng = ''
+        rows.append(f'| `{spec.name}` | `{spec.default}` | {rng} | {spec.description} |')
+    return '\n'.join(rows) + '\n'

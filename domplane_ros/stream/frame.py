@@ -1,0 +1,95 @@
+"""What the pipeline made of one stereo pair, and its debug picture."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from domplane_ros.core.mask import overlay
+from domplane_ros.core.result import FailedEstimate, PlaneEstimate
+import numpy as np
+
+
+@dataclass(frozen=True)
+class FrameResult:
+    """What the pipeline made of one stereo pair.
+
+    Attributes:
+        stamp_ns: The pair's stamp (the left image's), nanoseconds.
+        ok: Whether a plane was found; if not, ``homography`` is None and the mask is all 0.
+        homography: (3, 3) float64 left-to-right homography with ``H[2, 2] == 1``, or None.
+        mask: (H, W) uint8 left-image mask: 255 plane, 127 obstacle, 0 unknown.
+        estimate: The estimator's result (success or failure value).
+        left_points: (N, 2) float64 left corners.
+        right_points: (M, 2) float64 right corners.
+        reinitialised: True if this frame worked on the prior search (or the configured
+            initial homography) rather than a warm start.
+        reason: Why the frame failed ('' when ok).
+        state: Lock state after this frame: ``'locked'``, ``'tracking'`` or ``'searching'``.
+        timings_ms: Milliseconds spent in ``features``, ``tracking``, ``estimate``, ``mask``
+            and ``total``.
+        warnings: Input problems that did not refuse the pair (a stamp jump, a size change),
+            each a one-line message (see :mod:`domplane_ros.stream.health`).
+        left_lines: (K, 4) float64 left line segments ``(x1, y1, x2, y2)`` (empty unless
+            ``features.kind`` is ``lines`` or ``both``).
+        right_lines: (L, 4) float64 right line segments.
+        warm_start: Where this frame's estimate started: ``'prediction'`` (the last
+            homography moved through the tracked camera motion), ``'last'`` (the last
+            homography as is), ``'search'`` (prior candidates), ``'initial'`` (the
+            configured initial homography).
+        prediction: (3, 3) float64 predicted homography ``M_right H M_left^-1`` of this frame,
+            or None when tracking gave none.
+        candidates: Prior candidates refined in this frame (at most
+            ``pipeline.search_candidates_per_frame``).
+        fast_motion: True if the head's joints moved faster than
+            ``pipeline.fast_joint_velocity``.
+
+    """
+
+    stamp_ns: int
+    ok: bool
+    homography: np.ndarray | None
+    mask: np.ndarray
+    estimate: PlaneEstimate | FailedEstimate
+    left_points: np.ndarray
+    right_points: np.ndarray
+    reinitialised: bool
+    reason: str
+    state: str
+    timings_ms: dict[str, float] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()
+    left_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    right_lines: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    warm_start: str = ''
+    prediction: np.ndarray | None = None
+    candidates: int = 0
+    fast_motion: bool = False
+
+    @property
+    def n_inliers(self) -> int:
+        """Return the number of inlier left points (0 on failure)."""
+        return self.estimate.n_inliers if self.estimate is not None else 0
+
+
+def debug_overlay(left: np.ndarray, result: FrameResult) -> np.ndarray:
+    """Return the (H, W, 3) uint8 RGB debug image of a frame: mask tint, features.
+
+    Inlier corners are cyan circles and inlier segments cyan lines; the rest magenta (all of
+    them when no plane was found).
+
+    Args:
+        left: (H, W) uint8 left image of the frame.
+        result: The pipeline's result for it.
+
+    """
+    pts = result.left_points
+    segs = result.left_lines
+    est = result.estimate
+    if result.ok and pts.shape[0] == est.inliers.shape[0]:
+        inl = est.inliers
+    else:
+        inl = np.zeros(pts.shape[0], bool)
+    if result.ok and segs.shape[0] == est.line_inliers.shape[0]:
+        line_inl = est.line_inliers
+    else:
+        line_inl = np.zeros(segs.shape[0], bool)
+    return overlay(left, result.mask, pts[inl], pts[~inl], segs[line_inl], segs[~line_inl])
