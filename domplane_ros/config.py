@@ -119,7 +119,7 @@ class VerificationSettings(_Section):
     section: ClassVar[str] = 'verification'
 
     min_score: float = 0.2
-    working_width_px: int = 160
+    scale: float = 0.25
     drop_ratio: float = 0.5
     challenge_period: int = 10
     coarse_candidates: bool = True

@@ -120,8 +120,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'the same plane moved 6 px, explains) for a plane to be published; the '
               'confidence is 0.5 there, 0 at min_score - 0.1 and 1 at min_score + 0.1.',
               0.11, 0.89),
-    ParamSpec('verification.working_width_px', 160, 'int',
-              'Image width at which planes are verified, pixels.', 32, 2048),
+    ParamSpec('verification.scale', 0.25, 'float',
+              'Image scale at which planes are verified (the working width is kept within '
+              '64..480 px); the scores were calibrated at 0.25.', 0.05, 1.0),
     ParamSpec('verification.drop_ratio', 0.5, 'float',
               'A locked plane whose score falls below this fraction of the lock\'s median '
               'score is refused and the search starts in the same pair (a cut, a saccade).',

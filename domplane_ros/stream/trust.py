@@ -39,6 +39,9 @@ MIN_GROUND_SLOPE = 0.02
 # cameras on the same pair; else the swapped plane explains the image and the others are its
 # look-alikes (measured: the true plane outscores its look-alikes on 398 of 400 pairs).
 SWAP_DOMINANCE = 1.0
+# Working width limits of the verification, pixels.
+MIN_WORKING_WIDTH = 64
+MAX_WORKING_WIDTH = 480
 
 
 @dataclass(frozen=True)
@@ -80,12 +83,21 @@ class TrustGate:
     def __init__(self, settings: VerificationSettings, history: int = 10) -> None:
         """Start with no lock history."""
         self.settings = settings
-        self.config = VerificationConfig(working_width_px=settings.working_width_px,
-                                         reject_score=settings.min_score - 0.1,
-                                         accept_score=settings.min_score + 0.1)
+        self._configs: dict[int, VerificationConfig] = {}
         self._coarse = CoarseAligner(CoarseConfig(width_px=settings.coarse_width_px))
         self._scores: deque[float] = deque(maxlen=history)
         self._locked_frames = 0
+
+    def config(self, width: int) -> VerificationConfig:
+        """Return the verification settings for images ``width`` pixels wide."""
+        if width not in self._configs:
+            working = int(min(MAX_WORKING_WIDTH, max(MIN_WORKING_WIDTH,
+                                                     round(self.settings.scale * width))))
+            self._configs[width] = VerificationConfig(
+                working_width_px=min(working, width),
+                reject_score=self.settings.min_score - 0.1,
+                accept_score=self.settings.min_score + 0.1)
+        return self._configs[width]
 
     def reset(self) -> None:
         """Forget the lock's history (a new search)."""
@@ -113,7 +125,7 @@ class TrustGate:
             The :class:`Verdict`.
 
         """
-        check = verify_plane(left, right, homography, self.config, roi)
+        check = verify_plane(left, right, homography, self.config(left.shape[1]), roi)
         height, width = left.shape
         swap = swap_evidence(homography, width, height)
         slope = swap.disparity_slope
