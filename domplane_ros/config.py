@@ -12,7 +12,7 @@ so a config built by hand through the Python API is checked as strictly as a par
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from typing import Any, ClassVar, Mapping
 
 from domplane_ros.errors import ConfigError
@@ -24,8 +24,8 @@ __all__ = [
     'ConfigError', 'EstimatorConfig', 'FEATURE_KINDS', 'FeatureConfig', 'HeadConfig',
     'MaskConfig', 'PARAMETERS', 'PARAMETERS_BY_NAME', 'ParamSpec', 'PipelineConfig',
     'PlaneNodeConfig', 'POTENTIAL_NAMES', 'PriorConfig', 'SyncConfig', 'TrackingConfig',
-    'TransportConfig', 'VerificationSettings', 'check_value', 'default_params_yaml', 'flatten_params',
-    'load_params_file', 'parameters_markdown',
+    'TransportConfig', 'VerificationSettings', 'check_value', 'default_params_yaml',
+    'flatten_params', 'load_params_file', 'one_shot_search', 'parameters_markdown',
 ]
 
 
@@ -293,6 +293,17 @@ class PlaneNodeConfig:
                 silence_s=values['diagnostics.silence_s']),
             initial_homography=tuple(values['initial_homography']),
         )
+
+
+def one_shot_search(config: PlaneNodeConfig) -> PlaneNodeConfig:
+    """Return ``config`` with the prior search done in one frame (all of ``prior.refine_best``).
+
+    The live pipeline spreads a search over frames (``pipeline.search_candidates_per_frame``);
+    a single pair, as in the evaluations and the tests, gets the whole search at once.
+    """
+    per_frame = max(config.pipeline.search_candidates_per_frame, config.prior.refine_best)
+    return replace(config, pipeline=replace(config.pipeline,
+                                            search_candidates_per_frame=per_frame))
 
 
 def load_params_file(path: str, node_name: str = 'plane_node') -> PlaneNodeConfig:

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import cv2
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.sim.scene import scene_sequence
+from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.stream.pipeline import PlanePipeline
 import numpy as np
 from rosbags.rosbag2 import Reader, StoragePlugin, Writer

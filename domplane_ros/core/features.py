@@ -71,8 +71,20 @@ def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, i
         ValueError: If ``roi`` does not hold four finite fractions forming a non-empty box.
 
     """
+    x0, y0, x1, y1 = check_roi(roi)
+    return (int(math.floor(x0 * width)), int(math.floor(y0 * height)),
+            int(math.ceil(x1 * width)), int(math.ceil(y1 * height)))
+
+
+def check_roi(roi: Sequence[float]) -> tuple[float, float, float, float]:
+    """Return a region of interest as four fractions ``(x0, y0, x1, y1)`` of the image size.
+
+    Raises:
+        ValueError: If ``roi`` does not hold four finite fractions forming a non-empty box.
+
+    """
     try:
-        values = [float(v) for v in roi]
+        values = tuple(float(v) for v in roi)
     except (TypeError, ValueError) as err:
         raise ValueError(f'roi must be four numbers (x0, y0, x1, y1), got {roi!r}') from err
     if len(values) != 4 or not all(math.isfinite(v) for v in values):
@@ -81,8 +93,7 @@ def roi_to_pixels(roi: Sequence[float], width: int, height: int) -> tuple[int, i
     if not (0.0 <= x0 < x1 <= 1.0 and 0.0 <= y0 < y1 <= 1.0):
         raise ValueError(
             f'roi must be fractions with 0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1, got {roi!r}')
-    return (int(math.floor(x0 * width)), int(math.floor(y0 * height)),
-            int(math.ceil(x1 * width)), int(math.ceil(y1 * height)))
+    return x0, y0, x1, y1
 
 
 def gray_roi(gray: np.ndarray, roi: Sequence[float]) -> tuple[int, int, int, int]:

@@ -82,6 +82,40 @@ def as_homography(matrix: object, name: str = 'homography') -> np.ndarray:
     return arr
 
 
+def as_valid_homography(matrix: object, name: str = 'homography') -> np.ndarray:
+    """Return ``matrix`` as a finite, non-singular ``(3, 3) float64`` array.
+
+    For public functions that take a homography to use, not to fit (mask, verification).
+
+    Raises:
+        ValueError: If it is not numeric, not (3, 3), not finite or singular; the message
+            names the problem.
+
+    """
+    try:
+        hom = np.asarray(matrix, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f'{name} must be a (3, 3) array of numbers: {err}') from err
+    if hom.shape != (3, 3):
+        raise ValueError(f'{name} must have shape (3, 3), got {hom.shape}')
+    if not np.all(np.isfinite(hom)):
+        raise ValueError(f'{name} must be finite, got non-finite entries')
+    scale = np.abs(hom).max()
+    if scale == 0 or abs(np.linalg.det(hom / scale)) < 1e-12:
+        raise ValueError(f'{name} is singular')
+    return hom
+
+
+def resize_homography(sx: float, sy: float) -> np.ndarray:
+    """Map full-size pixel centres to resized pixel centres: ``x' = sx (x + 0.5) - 0.5``.
+
+    Returns:
+        (3, 3) float64, the pixel map of an image resized by ``sx`` across and ``sy`` down.
+
+    """
+    return np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+
+
 def check_homography(matrix: np.ndarray) -> str:
     """Return why ``matrix`` is not a usable homography, or ``''`` if it is.
 

@@ -16,10 +16,10 @@ Labels: :data:`PLANE` (255) on the dominant plane, :data:`OBSTACLE` (127) off it
 from __future__ import annotations
 
 import math
-from typing import Any
 
 import cv2
 from domplane_ros.config import MaskConfig
+from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
 import numpy as np
 
@@ -37,26 +37,6 @@ _INLIER_RGB = (0, 255, 255)
 _OUTLIER_RGB = (255, 0, 255)
 
 
-def _check_homography(homography: Any) -> np.ndarray:
-    try:
-        hom = np.asarray(homography, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f'homography must be a (3, 3) array of numbers: {err}') from err
-    if hom.shape != (3, 3):
-        raise ValueError(f'homography must have shape (3, 3), got {hom.shape}')
-    if not np.all(np.isfinite(hom)):
-        raise ValueError('homography must be finite, got non-finite entries')
-    scale = np.abs(hom).max()
-    if scale == 0 or abs(np.linalg.det(hom / scale)) < 1e-12:
-        raise ValueError('homography is singular')
-    return hom
-
-
-def _scale_matrix(sx: float, sy: float) -> np.ndarray:
-    """Map full-size pixel centres to resized pixel centres: ``x' = sx (x + 0.5) - 0.5``."""
-    return np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
-
-
 def _resize(image: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
     """Return the image resized by ``scale`` (at least 1 x 1) and the (3, 3) pixel map."""
     height, width = image.shape
@@ -64,7 +44,7 @@ def _resize(image: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
     if (new_w, new_h) == (width, height):
         return image, np.eye(3)
     small = cv2.resize(image, (new_w, new_h), interpolation=cv2.INTER_AREA)
-    return small, _scale_matrix(new_w / width, new_h / height)
+    return small, resize_homography(new_w / width, new_h / height)
 
 
 def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray) -> None:
@@ -129,7 +109,7 @@ def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     """
     left = check_gray(left, 'left')
     right = check_gray(right, 'right')
-    hom = _check_homography(homography)
+    hom = as_valid_homography(homography)
     height, width = left.shape
     left_small, scale_left = _resize(left, config.scale)
     right_small, scale_right = _resize(right, config.scale)

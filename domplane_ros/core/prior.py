@@ -1,6 +1,6 @@
 """Initial homographies from rough ranges of the camera set-up (Fornland & Schnörr, sec. 2.4).
 
-The camera model (shared with the scene renderer in :mod:`domplane_ros.sim.scene`):
+The camera model (shared with the scene renderer in :mod:`domplane_ros.sim.model`):
 
 * Left camera frame: x right, y down, z forward (optical axis). Principal point at the image
   centre, square pixels, focal length ``f`` in pixels: ``K = [[f, 0, cx], [0, f, cy], [0, 0, 1]]``.

@@ -50,6 +50,8 @@ import time
 from typing import Any, Sequence
 
 import cv2
+from domplane_ros.core.features import check_roi
+from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
 import numpy as np
 
@@ -162,46 +164,8 @@ class SwapEvidence:
     disparity_bottom_px: float
 
 
-def check_homography(homography: Any, name: str = 'homography') -> np.ndarray:
-    """Return ``homography`` as a finite, non-singular (3, 3) float64 array.
-
-    Raises:
-        ValueError: If it is not numeric, not (3, 3), not finite or singular; the message
-            names the problem.
-
-    """
-    try:
-        hom = np.asarray(homography, dtype=np.float64)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f'{name} must be a (3, 3) array of numbers: {err}') from err
-    if hom.shape != (3, 3):
-        raise ValueError(f'{name} must have shape (3, 3), got {hom.shape}')
-    if not np.all(np.isfinite(hom)):
-        raise ValueError(f'{name} must be finite, got non-finite entries')
-    scale = np.abs(hom).max()
-    if scale == 0 or abs(np.linalg.det(hom / scale)) < 1e-12:
-        raise ValueError(f'{name} is singular')
-    return hom
-
-
 def _check_roi(roi: Sequence[float] | None) -> tuple[float, float, float, float]:
-    if roi is None:
-        return (0.0, 0.0, 1.0, 1.0)
-    try:
-        values = tuple(float(v) for v in roi)
-    except (TypeError, ValueError) as err:
-        raise ValueError(f'roi must be four numbers (x0, y0, x1, y1): {err}') from err
-    if len(values) != 4 or not all(math.isfinite(v) for v in values):
-        raise ValueError(f'roi must be four finite numbers (x0, y0, x1, y1), got {roi!r}')
-    x0, y0, x1, y1 = values
-    if not (0.0 <= x0 < x1 <= 1.0 and 0.0 <= y0 < y1 <= 1.0):
-        raise ValueError(f'roi must satisfy 0 <= x0 < x1 <= 1 and 0 <= y0 < y1 <= 1, got {roi!r}')
-    return x0, y0, x1, y1
-
-
-def _scale_matrix(sx: float, sy: float) -> np.ndarray:
-    """Map full-size pixel centres to resized pixel centres: ``x' = sx (x + 0.5) - 0.5``."""
-    return np.array([[sx, 0.0, 0.5 * sx - 0.5], [0.0, sy, 0.5 * sy - 0.5], [0.0, 0.0, 1.0]])
+    return (0.0, 0.0, 1.0, 1.0) if roi is None else check_roi(roi)
 
 
 def _shrink(image: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
@@ -219,7 +183,7 @@ def _shrink(image: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
     if full_w > width:
         new_h = max(1, int(round(height * width / full_w)))
         image = cv2.resize(image, (width, new_h), interpolation=cv2.INTER_AREA)
-        pixel_map = _scale_matrix(width / full_w, new_h / height) @ pixel_map
+        pixel_map = resize_homography(width / full_w, new_h / height) @ pixel_map
     return image, pixel_map
 
 
@@ -312,7 +276,7 @@ def agreement_maps(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
 
     """
     left, right = _check_pair(left, right)
-    return _maps(left, right, check_homography(homography), config, _check_roi(roi))
+    return _maps(left, right, as_valid_homography(homography), config, _check_roi(roi))
 
 
 def _check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -352,7 +316,7 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     """
     start = time.perf_counter()
     left, right = _check_pair(left, right)
-    hom = check_homography(homography)
+    hom = as_valid_homography(homography)
     region = _check_roi(roi)
     maps = _maps(left, right, hom, config, region)
     return _verdict(maps, config, start)
@@ -417,7 +381,7 @@ def swap_evidence(homography: np.ndarray, width: int, height: int,
             is not positive or the row band is empty.
 
     """
-    hom = check_homography(homography)
+    hom = as_valid_homography(homography)
     if width < 1 or height < 2:
         raise ValueError(f'image size must be at least 1 x 2, got {width} x {height}')
     lo, hi = (float(r) for r in rows)

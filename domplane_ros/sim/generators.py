@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 from typing import Iterator, Sequence
 
+from domplane_ros.config import PriorConfig
 from domplane_ros.sim.model import (BACKGROUNDS, Box, CameraSetup, footprint_radius, HeadPose,
                                     level_boxes, level_from_left, overlaps_any, StereoFrame)
 from domplane_ros.sim.render import BOX, FLOOR, left_labels, render_stereo
@@ -22,6 +23,8 @@ SETUP_RANGES = {
     'tilt_deg': (10.0, 50.0),
     'vergence_deg': (-2.0, 4.0),
 }
+# The prior that covers every drawn set-up (equal to the default prior).
+RENDERED_PRIOR = PriorConfig(**SETUP_RANGES)
 
 
 def random_setup(rng: np.random.Generator, width: int = 640, height: int = 480) -> CameraSetup:

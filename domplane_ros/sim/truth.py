@@ -2,12 +2,14 @@
 
 The tools score a homography by the mean distance between its image and the true homography's
 image of floor pixels that the right camera sees; they differ only in which of those pixels
-they use (a grid, or every k-th pixel), so both samplings are here.
+they use (a grid, or every k-th pixel), so both samplings are here. Over a sequence,
+:func:`relock_runs` counts the frames each loss of the lock lasted.
 """
 
 from __future__ import annotations
 
 import math
+from typing import Sequence
 
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.sim.model import StereoFrame
@@ -46,3 +48,37 @@ def transfer_error_px(homography: np.ndarray | None, frame: StereoFrame,
         return math.inf
     diff = apply_homography(homography, points) - apply_homography(frame.homography, points)
     return float(np.mean(np.linalg.norm(diff, axis=1)))
+
+
+def relock_runs(locked: Sequence[bool], dropout: Sequence[bool] | None = None) -> list[int]:
+    """Return, for each loss, the frames it took to re-lock.
+
+    A loss starts at an unlocked frame after a locked one and ends at the next locked frame;
+    frames before the first locked one are not a loss. Drop-out frames (blank input) in a loss
+    are not counted, so a loss caused by a drop-out counts the frames after the input came
+    back (0 if the first of them is locked). A loss still open at the end of the sequence
+    counts with its length so far.
+
+    Args:
+        locked: Per-frame lock flags of one sequence, in order.
+        dropout: Per-frame drop-out flags (default: none).
+
+    Returns:
+        One count per loss.
+
+    """
+    runs = []
+    seen_lock = in_loss = False
+    run = 0
+    for k, flag in enumerate(locked):
+        if flag:
+            if in_loss:
+                runs.append(run)
+            seen_lock, in_loss, run = True, False, 0
+        elif seen_lock:
+            in_loss = True
+            if not (dropout is not None and dropout[k]):
+                run += 1
+    if in_loss:
+        runs.append(run)
+    return runs

@@ -39,14 +39,14 @@ from pathlib import Path
 import sys
 from typing import Callable
 
+from domplane_ros.sim.generators import RENDERED_PRIOR
 from domplane_ros.tools.common import add_output_argument, machine_name, one_core, tool_parser
 from domplane_ros.tools.evaluation.datasets import (BOOKS_PRIOR, Case, CHESSBOARD_PRIOR,
                                                     ENSENSO_PRIOR, evaluate_books,
                                                     evaluate_chessboards, evaluate_ensenso,
                                                     evaluate_kitti, evaluate_rendered,
-                                                    evaluate_streams, KITTI_PRIOR, KITTI_ROI,
-                                                    RENDERED_PRIOR)
-from domplane_ros.tools.evaluation.methods import one_shot_search, ORB_FEATURES, ORB_THRESHOLD_PX
+                                                    evaluate_streams, KITTI_PRIOR, KITTI_ROI)
+from domplane_ros.tools.evaluation.methods import ORB_FEATURES, ORB_THRESHOLD_PX
 from domplane_ros.tools.evaluation.plots import contact_sheet, error_plot, pick_rendered
 from domplane_ros.tools.evaluation.references import (default_data_dir, ENSENSO_DIR,
                                                       ENSENSO_STEM, KITTI_DIR, OPENCV_DIR,
@@ -54,9 +54,6 @@ from domplane_ros.tools.evaluation.references import (default_data_dir, ENSENSO_
 from domplane_ros.tools.evaluation.tables import (chessboard_table, kitti_table, prior_text,
                                                   qualitative_table, rendered_table, speed_line,
                                                   targets, write_csv)
-
-# Tests of the core and the stream import these two from here.
-__all__ = ['main', 'one_shot_search', 'RENDERED_PRIOR']
 
 Emit = Callable[[str], None]
 
@@ -116,7 +113,7 @@ def _run_rendered(n_scenes: int, out: Path, groups: dict[str, list[Case]], emit:
     cases = evaluate_rendered(n_scenes)
     groups['rendered'] = cases
     emit(f'\n## rendered scenes (seeds 0..{n_scenes - 1}, random_scene defaults)\n'
-         f"{prior_text(RENDERED_PRIOR)} (= scene.SETUP_RANGES, the scenes' range)")
+         f"{prior_text(RENDERED_PRIOR)} (= generators.SETUP_RANGES, the scenes' range)")
     emit(rendered_table(cases))
     emit(speed_line('rendered', cases))
     write_csv(out / 'rendered.csv', cases)

@@ -37,12 +37,12 @@ import time
 from typing import Any, Iterable, Sequence
 
 import cv2
-from domplane_ros.config import PlaneNodeConfig, TrackingConfig
+from domplane_ros.config import one_shot_search, PlaneNodeConfig, TrackingConfig
 from domplane_ros.core.mask import overlay
 from domplane_ros.sim import truth
 from domplane_ros.sim.head import head_sequence, HeadMotion
 from domplane_ros.sim.model import StereoFrame
-from domplane_ros.sim.truth import transfer_error_px
+from domplane_ros.sim.truth import relock_runs, transfer_error_px
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
 import numpy as np
@@ -75,9 +75,7 @@ def method_config(method: str, base: PlaneNodeConfig | None = None) -> PlaneNode
     if method == 'last':
         return replace(base, tracking=replace(base.tracking, enabled=False))
     if method == 'cold':
-        return replace(base, tracking=TrackingConfig(enabled=False), pipeline=replace(
-            base.pipeline, search_candidates_per_frame=max(
-                base.pipeline.search_candidates_per_frame, base.prior.refine_best)))
+        return replace(one_shot_search(base), tracking=TrackingConfig(enabled=False))
     raise ValueError(f'unknown method {method!r}; expected one of {", ".join(METHODS)}')
 
 
@@ -123,40 +121,6 @@ class FrameRecord:
     def locked(self) -> bool:
         """Return True if a plane was found within :data:`LOCK_ERROR_PX` of the truth."""
         return self.ok and self.error_px < LOCK_ERROR_PX
-
-
-def relock_runs(locked: Sequence[bool], dropout: Sequence[bool] | None = None) -> list[int]:
-    """Return, for each loss, the frames it took to re-lock.
-
-    A loss starts at an unlocked frame after a locked one and ends at the next locked frame;
-    frames before the first locked one are not a loss. Drop-out frames (blank input) in a loss
-    are not counted, so a loss caused by a drop-out counts the frames after the input came
-    back (0 if the first of them is locked). A loss still open at the end of the sequence
-    counts with its length so far.
-
-    Args:
-        locked: Per-frame lock flags of one sequence, in order.
-        dropout: Per-frame drop-out flags (default: none).
-
-    Returns:
-        One count per loss.
-
-    """
-    runs = []
-    seen_lock = in_loss = False
-    run = 0
-    for k, flag in enumerate(locked):
-        if flag:
-            if in_loss:
-                runs.append(run)
-            seen_lock, in_loss, run = True, False, 0
-        elif seen_lock:
-            in_loss = True
-            if not (dropout is not None and dropout[k]):
-                run += 1
-    if in_loss:
-        runs.append(run)
-    return runs
 
 
 def summarise(records: Sequence[FrameRecord]) -> dict[str, float]:

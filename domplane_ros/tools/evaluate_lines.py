@@ -34,18 +34,17 @@ import sys
 import time
 from typing import Any, Sequence
 
-from domplane_ros.config import FeatureConfig, PlaneNodeConfig
+from domplane_ros.config import FeatureConfig, one_shot_search, PlaneNodeConfig
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.mask import overlay
-from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.generators import random_scene, RENDERED_PRIOR
 from domplane_ros.sim.textures import PLAIN_FLOOR_KINDS
 from domplane_ros.sim.truth import floor_points
 from domplane_ros.stream.pipeline import debug_overlay, FrameResult, PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
 from domplane_ros.tools.evaluation.datasets import (CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX,
-                                                    KITTI_PRIOR, KITTI_ROI, RENDERED_PRIOR,
-                                                    SOLVED_PX)
-from domplane_ros.tools.evaluation.methods import one_shot_search, run_orb_magsac
+                                                    KITTI_PRIOR, KITTI_ROI, SOLVED_PX)
+from domplane_ros.tools.evaluation.methods import run_orb_magsac
 from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
                                                       default_data_dir, KITTI_DIR,
                                                       kitti_reference, mean_transfer_px,

@@ -29,14 +29,14 @@ import sys
 import time
 from typing import Callable, Sequence
 
-from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.config import one_shot_search, PlaneNodeConfig
 from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, rough_rig,
                                    swapped)
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress
-from domplane_ros.tools.evaluation.methods import one_shot_search, run_orb_magsac
+from domplane_ros.tools.evaluation.methods import run_orb_magsac
 import numpy as np
 
 CORRECT_PX = 1.0

@@ -1,7 +1,7 @@
 """Load test: both cameras at 100 Hz into plane_node over DDS on loopback, for 60 s.
 
 plane_node runs in its own process (started here, ``python -m domplane_ros.ros.node``), this
-process publishes pre-rendered stereo pairs (``scene.py``; a head standing still, each pair
+process publishes pre-rendered stereo pairs (``sim.generators``; a head standing still, each pair
 with its own pixel noise, so every homography can be checked against the one true plane
 without matching it to a frame: ``plane/homography`` carries no stamp) with wall-clock stamps
 at ``--rate`` Hz, and listens to ``plane/mask``,

@@ -1,6 +1,6 @@
 """Soak run: 10,000 stereo pairs through the pipeline in-process, watching memory and time.
 
-Pre-renders a modest set of pairs (``scene.py``, played forwards and backwards), then feeds
+Pre-renders a modest set of pairs (``sim.generators``, played forwards and backwards), then feeds
 ``--pairs`` pairs with increasing stamps through the same path as plane_replay (duck-typed
 ``sensor_msgs/Image`` messages -> synchroniser -> decode -> :class:`PlanePipeline`), with a
 bad frame mixed in every ``--bad-every`` pairs (an unsupported encoding, a black pair, a pair of

@@ -5,7 +5,8 @@ from __future__ import annotations
 import cv2
 from domplane_ros.config import FeatureConfig
 from domplane_ros.core import features
-from domplane_ros.sim import scene
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.model import StereoFrame
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
@@ -16,8 +17,8 @@ CONFIG = FeatureConfig()
 
 
 @pytest.fixture(scope='module')
-def frames() -> list[scene.StereoFrame]:
-    return [scene.random_scene(seed, gain=1.2, offset=-15.0, noise_std=1.0)
+def frames() -> list[StereoFrame]:
+    return [random_scene(seed, gain=1.2, offset=-15.0, noise_std=1.0)
             for seed in range(8)]
 
 

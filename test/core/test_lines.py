@@ -4,17 +4,16 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from domplane_ros.config import FeatureConfig, PlaneNodeConfig, PriorConfig
+from domplane_ros.config import FeatureConfig, one_shot_search, PlaneNodeConfig, PriorConfig
 from domplane_ros.core.estimator import estimate_plane, FailedEstimate, PlaneEstimate
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.lines import (detect_lines, LineMatcher, lines_reason, map_segments,
                                      segment_lengths, segment_lines, UNMATCHED_PX)
 from domplane_ros.core.potentials import POTENTIALS
-from domplane_ros.sim.scene import random_scene
+from domplane_ros.sim.generators import random_scene, RENDERED_PRIOR
 from domplane_ros.sim.synthetic import (displace_homography, line_scene, plane_error_px,
                                         point_scene)
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
-from domplane_ros.tools.evaluate import one_shot_search, RENDERED_PRIOR
 from hypothesis import assume, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest

@@ -7,7 +7,9 @@ import dataclasses
 import cv2
 from domplane_ros.config import MaskConfig
 from domplane_ros.core import mask
-from domplane_ros.sim import scene
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.model import Box, CameraSetup, StereoFrame
+from domplane_ros.sim.render import render_stereo
 from hypothesis import given, settings
 from hypothesis import strategies as st
 import numpy as np
@@ -18,13 +20,13 @@ SHIFT_15PX = np.array([[1.0, 0.0, 15.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
 
 
 @pytest.fixture(scope='module')
-def frames() -> list[scene.StereoFrame]:
+def frames() -> list[StereoFrame]:
     # The right camera has a gain and offset that the NCC must ignore.
-    return [scene.random_scene(seed, gain=1.2, offset=-15.0, noise_std=1.0)
+    return [random_scene(seed, gain=1.2, offset=-15.0, noise_std=1.0)
             for seed in range(8)]
 
 
-def _scores(frame: scene.StereoFrame, labels: np.ndarray) -> dict[str, float]:
+def _scores(frame: StereoFrame, labels: np.ndarray) -> dict[str, float]:
     return mask.mask_scores(labels, frame.plane_left & frame.visible_in_right,
                             frame.obstacle_left)
 
@@ -95,9 +97,8 @@ def test_labels_shape_and_dtype(frames):
 
 @pytest.mark.parametrize('scale', [0.5, 1.0, 0.3])
 def test_pixels_mapping_outside_the_right_image_are_unknown(scale):
-    setup = scene.CameraSetup(500.0, 0.4, 30.0, 3.0, 320, 240)
-    frame = scene.render_stereo(setup, (scene.Box(0.0, 3.0, 0.5, 0.5, 0.5),), gain=1.2,
-                                offset=-15.0)
+    setup = CameraSetup(500.0, 0.4, 30.0, 3.0, 320, 240)
+    frame = render_stereo(setup, (Box(0.0, 3.0, 0.5, 0.5, 0.5),), gain=1.2, offset=-15.0)
     labels = mask.plane_mask(frame.left, frame.right, frame.homography,
                              MaskConfig(scale=scale))
     outside = _maps_outside(frame.homography, frame.left.shape, frame.right.shape)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from domplane_ros.config import POTENTIAL_NAMES
 from domplane_ros.core.potentials import make_potential, POTENTIALS
 from hypothesis import given, settings, strategies as st
 import numpy as np
@@ -22,6 +23,10 @@ def test_step_minimises_the_auxiliary_energy(name, lam, threshold):
     best = brute.min(axis=1)
     ours = 0.5 * s ** 2 + pot.penalty(r - s)
     assert np.all(ours <= best + 1e-6 * (1 + best))
+
+
+def test_the_parameter_table_offers_every_registered_potential():
+    assert sorted(POTENTIAL_NAMES) == sorted(POTENTIALS)
 
 
 def test_least_squares_auxiliary_point_interpolates():

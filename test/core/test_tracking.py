@@ -10,7 +10,7 @@ from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.prior import intrinsics, plane_homography
 from domplane_ros.core.tracking import (camera_motion, fit_camera_motion, predict_plane_homography,
                                         track_points)
-from domplane_ros.sim.scene import random_scene
+from domplane_ros.sim.generators import random_scene
 import numpy as np
 import pytest
 

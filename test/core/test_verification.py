@@ -5,13 +5,14 @@ from __future__ import annotations
 import cv2
 from domplane_ros.config import PriorConfig
 from domplane_ros.core import prior, verification
-from domplane_ros.sim import scene
+from domplane_ros.sim.model import Box, CameraSetup, HeadPose, StereoFrame
+from domplane_ros.sim.render import render_stereo
 import numpy as np
 import pytest
 
 CONFIG = verification.VerificationConfig()
-SETUP = scene.CameraSetup(focal_px=300.0, baseline_over_height=0.2, tilt_deg=30.0,
-                          vergence_deg=1.0, width=320, height=240)
+SETUP = CameraSetup(focal_px=300.0, baseline_over_height=0.2, tilt_deg=30.0,
+                    vergence_deg=1.0, width=320, height=240)
 # Floor periods (camera height 1) of the rendered planks and tiles, along the level x axis
 # when the head pose's yaw is 0: 32 texels of 0.005 and 64 texels of 0.005.
 PERIOD = {'planks': 0.16, 'tiles': 0.32}
@@ -22,12 +23,12 @@ def _translate(dx: float, dy: float) -> np.ndarray:
 
 
 @pytest.fixture(scope='module', params=['planks', 'tiles'])
-def frame(request: pytest.FixtureRequest) -> scene.StereoFrame:
+def frame(request: pytest.FixtureRequest) -> StereoFrame:
     # Yaw 0 puts the texture axes on the level axes, so a baseline change of one period is
     # exactly "one plank or tile off". The right camera has a gain and offset.
-    return scene.render_stereo(SETUP, [scene.Box(0.4, 3.0, 0.5, 0.5, 0.6, 20.0)],
-                               floor=request.param, seed=3, gain=1.15, offset=-10.0,
-                               head_pose=scene.HeadPose(1.3, 2.1, 0.0))
+    return render_stereo(SETUP, [Box(0.4, 3.0, 0.5, 0.5, 0.6, 20.0)],
+                         floor=request.param, seed=3, gain=1.15, offset=-10.0,
+                         head_pose=HeadPose(1.3, 2.1, 0.0))
 
 
 def _inverse(hom: np.ndarray) -> np.ndarray:
@@ -35,7 +36,7 @@ def _inverse(hom: np.ndarray) -> np.ndarray:
     return inv / inv[2, 2]
 
 
-def test_true_plane_is_accepted_with_high_confidence(frame: scene.StereoFrame) -> None:
+def test_true_plane_is_accepted_with_high_confidence(frame: StereoFrame) -> None:
     result = verification.verify_plane(frame.left, frame.right, frame.homography, CONFIG)
     assert result.accepted, result
     assert result.reason == ''
@@ -45,7 +46,7 @@ def test_true_plane_is_accepted_with_high_confidence(frame: scene.StereoFrame) -
 
 
 @pytest.mark.parametrize('shift', [(10.0, 0.0), (-20.0, 0.0), (0.0, 10.0), (40.0, 0.0)])
-def test_shifted_plane_is_rejected(frame: scene.StereoFrame, shift: tuple[float, float]
+def test_shifted_plane_is_rejected(frame: StereoFrame, shift: tuple[float, float]
                                    ) -> None:
     # 10-20 px is one plank or tile in the image's near field at this size.
     true = verification.verify_plane(frame.left, frame.right, frame.homography, CONFIG)
@@ -58,7 +59,7 @@ def test_shifted_plane_is_rejected(frame: scene.StereoFrame, shift: tuple[float,
     assert true.score > 3.0 * wrong.score
 
 
-def test_one_period_look_alike_scores_below_the_truth(frame: scene.StereoFrame) -> None:
+def test_one_period_look_alike_scores_below_the_truth(frame: StereoFrame) -> None:
     # The plane one plank/tile off on the floor matches the periodic floor almost everywhere;
     # the non-periodic texture (plank ends, tile shades, the box) still ranks it lower.
     period = PERIOD[frame.floor]
@@ -70,8 +71,8 @@ def test_one_period_look_alike_scores_below_the_truth(frame: scene.StereoFrame) 
         assert wrong.score < 0.8 * true.score, (baseline, wrong.score, true.score)
 
 
-def test_cut_and_prior_planes_are_rejected(frame: scene.StereoFrame) -> None:
-    other = scene.CameraSetup(650.0, 0.1, 15.0, -1.0, 320, 240).homography()
+def test_cut_and_prior_planes_are_rejected(frame: StereoFrame) -> None:
+    other = CameraSetup(650.0, 0.1, 15.0, -1.0, 320, 240).homography()
     candidates = prior.prior_candidates(PriorConfig(), 320, 240)
     corners = np.array([[0.0, 120.0], [319.0, 120.0], [319.0, 239.0], [0.0, 239.0]])
     truth = cv2.perspectiveTransform(corners[None], frame.homography)[0]
@@ -82,7 +83,7 @@ def test_cut_and_prior_planes_are_rejected(frame: scene.StereoFrame) -> None:
         assert not result.accepted, result
 
 
-def test_swapped_cameras_are_detected(frame: scene.StereoFrame) -> None:
+def test_swapped_cameras_are_detected(frame: StereoFrame) -> None:
     width, height = SETUP.width, SETUP.height
     correct = verification.swap_evidence(frame.homography, width, height)
     assert not correct.swapped and correct.disparity_slope > 0.0
@@ -98,7 +99,7 @@ def test_swapped_cameras_are_detected(frame: scene.StereoFrame) -> None:
 
 
 def test_random_planes_are_rejected() -> None:
-    frame = scene.render_stereo(SETUP, floor='random', seed=5, gain=0.9, offset=12.0)
+    frame = render_stereo(SETUP, floor='random', seed=5, gain=0.9, offset=12.0)
     assert verification.verify_plane(frame.left, frame.right, frame.homography).accepted
     rng = np.random.default_rng(0)
     corners = np.array([[0, 0], [319, 0], [319, 239], [0, 239]], np.float32)

@@ -20,7 +20,7 @@ from bag_helpers import (image_msg, LEFT, left_stamp, read_bag, RIGHT, RIGHT_OFF
                          write_bag)
 from domplane_ros.config import PipelineConfig, PlaneNodeConfig
 from domplane_ros.replay.cli import main, run_replay
-from domplane_ros.sim.scene import scene_sequence
+from domplane_ros.sim.generators import scene_sequence
 import numpy as np
 import pytest
 from rosbags.rosbag2 import StoragePlugin, Writer

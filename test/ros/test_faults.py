@@ -12,7 +12,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.ros.messages import image_msg, stamped_header
 from domplane_ros.ros.node import PlaneNode
-from domplane_ros.sim.scene import random_scene
+from domplane_ros.sim.generators import random_scene
 import numpy as np
 import pytest
 from rclpy.executors import SingleThreadedExecutor

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import math
 
-from domplane_ros.sim import scene
 from domplane_ros.sim.model import Box, CameraSetup
 from domplane_ros.sim.render import render_stereo
-from domplane_ros.sim.truth import every_floor_pixel, floor_points, transfer_error_px
+from domplane_ros.sim.truth import (every_floor_pixel, floor_points, relock_runs,
+                                    transfer_error_px)
 import numpy as np
 import pytest
 
@@ -46,6 +46,11 @@ def test_transfer_error_is_zero_for_the_truth_and_inf_without_a_homography(frame
     assert transfer_error_px(frame.homography, frame, np.zeros((0, 2))) == math.inf
 
 
-def test_scene_module_keeps_the_names_of_the_split_renderer():
-    for name in scene.__all__:
-        assert getattr(scene, name) is not None, name
+def test_relock_runs_counts_frames_between_losses_and_relocks():
+    assert relock_runs([False, False, True, True]) == []
+    assert relock_runs([True, False, False, True, False, True]) == [2, 1]
+    assert relock_runs([True, True, False, False]) == [2]
+    # Drop-out frames (blank input) do not count: re-lock frames after the input came back.
+    assert relock_runs([True, False, False, False, True],
+                       [False, True, True, False, False]) == [1]
+    assert relock_runs([True, False, True], [False, True, False]) == [0]

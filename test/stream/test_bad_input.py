@@ -2,7 +2,7 @@
 
 Every bad input must give a failure (or a warning) with a reason that names the problem, a
 count, no homography and a mask of zeros, and the next good pair must be handled normally.
-The ground truth comes from the renderer (:mod:`domplane_ros.sim.scene`).
+The ground truth comes from the renderer (:mod:`domplane_ros.sim.generators`).
 """
 
 from __future__ import annotations
@@ -11,19 +11,18 @@ from dataclasses import replace
 from types import SimpleNamespace
 
 import cv2
-from domplane_ros.config import PipelineConfig, PlaneNodeConfig
+from domplane_ros.config import one_shot_search, PipelineConfig, PlaneNodeConfig
 from domplane_ros.core.estimator import PlaneEstimate
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.image import gray_to_image_fields, message_to_gray
 from domplane_ros.errors import ImageDecodeError
-from domplane_ros.sim.scene import random_scene
+from domplane_ros.sim.generators import random_scene
 from domplane_ros.stream.health import (inlier_spread, input_diagnostic_values, problem_key,
                                         StampChecks, Throttle)
 import domplane_ros.stream.pipeline as pipeline_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import ERROR, OK, plane_status, WARN
 from domplane_ros.stream.sync import ApproximateTimeSync
-from domplane_ros.tools.evaluate import one_shot_search
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest

@@ -1,6 +1,6 @@
 """Active head: lock states, temporal prediction, re-lock and the search budget.
 
-Short rendered sequences (:func:`domplane_ros.sim.scene.head_sequence`) of a head panning and
+Short rendered sequences (:func:`domplane_ros.sim.head.head_sequence`) of a head panning and
 tilting at 60 deg/s (30 Hz) with vergence changes; every check is against the rendered truth.
 The full 300-frame runs per speed are in ``python -m domplane_ros.tools.evaluate_head``.
 """
@@ -11,11 +11,9 @@ from dataclasses import replace
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
-from domplane_ros.sim.scene import head_sequence, HeadMotion
+from domplane_ros.sim.head import head_sequence, HeadMotion
+from domplane_ros.sim.truth import floor_points, relock_runs, transfer_error_px
 from domplane_ros.stream.pipeline import LOCKED, PlanePipeline, SEARCHING, TRACKING
-from domplane_ros.tools.evaluate_head import dropout_frames, floor_points, method_config
-from domplane_ros.tools.evaluate_head import relock_runs
-from domplane_ros.tools.evaluate_head import transfer_error_px
 import numpy as np
 import pytest
 
@@ -28,7 +26,13 @@ def fast_sequence():
     """22 frames at 60 deg/s pan and tilt (2 degrees per frame), 12 deg/s vergence."""
     frames = list(head_sequence(N_FRAMES, 1, HeadMotion.at_speed(60.0), floor='random',
                                 supersample=1))
-    return [(f, floor_points(f)) for f in frames]
+    return [(f, floor_points(f, 8, 4)) for f in frames]
+
+
+def _tracking(enabled):
+    """Return the default configuration with the temporal prediction on or off."""
+    base = PlaneNodeConfig()
+    return replace(base, tracking=replace(base.tracking, enabled=enabled))
 
 
 def _run(pipeline, sequence, blank_at=(), reset_at=()):
@@ -64,8 +68,8 @@ def test_head_sequence_truth_follows_tilt_and_vergence_only():
 
 
 def test_prediction_keeps_the_lock_where_the_last_homography_loses_it(fast_sequence):
-    predicted = _run(PlanePipeline(method_config('prediction')), fast_sequence)
-    last_only = _run(PlanePipeline(method_config('last')), fast_sequence)
+    predicted = _run(PlanePipeline(_tracking(True)), fast_sequence)
+    last_only = _run(PlanePipeline(_tracking(False)), fast_sequence)
     first = next(i for i, (r, e) in enumerate(predicted) if _locked(r, e))
     assert first <= 2  # the spread-out initial search
     assert all(_locked(r, e) for r, e in predicted[first:]), [
@@ -138,7 +142,7 @@ def test_fast_joint_hint_widens_the_basin_of_the_last_homography(fast_sequence):
     hinted = []
     plain = []
     for out, speed in ((hinted, 1.0), (plain, None)):
-        pipeline = PlanePipeline(method_config('last'))
+        pipeline = PlanePipeline(_tracking(False))
         for i, (frame, points) in enumerate(fast_sequence):
             result = pipeline.process(frame.left, frame.right, i * STEP_NS, joint_speed=speed)
             out.append(_locked(result, transfer_error_px(result.homography, frame, points)))
@@ -156,17 +160,6 @@ def test_joint_speed_hint_is_reported_and_validated(fast_sequence):
     assert fast.fast_motion and not slow.fast_motion and not none.fast_motion
     with pytest.raises(ValueError, match='joint_speed'):
         pipeline.process(frame.left, frame.right, 3 * STEP_NS, joint_speed=float('nan'))
-
-
-def test_relock_runs_counts_frames_between_losses_and_relocks():
-    assert relock_runs([False, False, True, True]) == []
-    assert relock_runs([True, False, False, True, False, True]) == [2, 1]
-    assert relock_runs([True, True, False, False]) == [2]
-    # Drop-out frames (blank input) do not count: re-lock frames after the input came back.
-    assert relock_runs([True, False, False, False, True],
-                       [False, True, True, False, False]) == [1]
-    assert relock_runs([True, False, True], [False, True, False]) == [0]
-    assert dropout_frames(10, 4, (1, 2)) == {2, 6, 7}
 
 
 def test_one_two_step_problem_per_frame(fast_sequence, monkeypatch):

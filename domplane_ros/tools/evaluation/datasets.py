@@ -14,17 +14,16 @@ import sys
 import time
 from typing import Any, Callable, Sequence
 
-from domplane_ros.config import FeatureConfig, PlaneNodeConfig, PriorConfig
+from domplane_ros.config import FeatureConfig, one_shot_search, PlaneNodeConfig, PriorConfig
 from domplane_ros.core.homography import apply_homography, fit_homography
 from domplane_ros.core.mask import mask_scores, OBSTACLE, PLANE
 from domplane_ros.core.prior import prior_candidates
-from domplane_ros.sim.generators import random_scene, scene_sequence, SETUP_RANGES
+from domplane_ros.sim.generators import random_scene, RENDERED_PRIOR, scene_sequence
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.truth import floor_points
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import progress
-from domplane_ros.tools.evaluation.methods import (MethodRun, one_shot_search, ours_run,
-                                                   run_orb_magsac, run_ours)
+from domplane_ros.tools.evaluation.methods import MethodRun, ours_run, run_orb_magsac, run_ours
 from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
                                                       ENSENSO_STEM, kitti_reference,
                                                       KittiReference, mean_transfer_px,
@@ -54,8 +53,6 @@ BOOKS_PRIOR = PriorConfig(focal_px=(400.0, 900.0), baseline_over_height=(0.05, 0
 # degrees.
 ENSENSO_PRIOR = PriorConfig(focal_px=(2500.0, 3500.0), baseline_over_height=(0.05, 0.09),
                             tilt_deg=(80.0, 89.0), vergence_deg=(2.0, 6.0))
-# Rendered scenes are drawn within scene.SETUP_RANGES, which is also the default prior.
-RENDERED_PRIOR = PriorConfig(**SETUP_RANGES)
 SOLVED_PX = 1.0
 KITTI_TARGET_PX = 1.5
 CHESSBOARD_TARGET_PX = 2.0

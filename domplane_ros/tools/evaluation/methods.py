@@ -7,13 +7,13 @@ repetitions; the baseline is OpenCV ORB, brute-force Hamming matching with cross
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 import math
 import time
 from typing import Sequence
 
 import cv2
-from domplane_ros.config import MaskConfig, PlaneNodeConfig
+from domplane_ros.config import MaskConfig, one_shot_search, PlaneNodeConfig
 from domplane_ros.core.mask import plane_mask
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 import numpy as np
@@ -95,17 +95,6 @@ def run_ours(left: np.ndarray, right: np.ndarray, config: PlaneNodeConfig,
         if first is None:
             first, warm = result, again
     return ours_run(first, float(np.median(cold_ms)), float(np.median(warm_ms)), warm)
-
-
-def one_shot_search(config: PlaneNodeConfig) -> PlaneNodeConfig:
-    """Return ``config`` with the prior search done in one frame (all of refine_best).
-
-    The live pipeline spreads a search over frames (``pipeline.search_candidates_per_frame``);
-    a single pair gets the whole search at once.
-    """
-    per_frame = max(config.pipeline.search_candidates_per_frame, config.prior.refine_best)
-    return replace(config, pipeline=replace(config.pipeline,
-                                            search_candidates_per_frame=per_frame))
 
 
 def ours_run(result: FrameResult, time_ms: float, warm_ms: float = math.nan,
