@@ -124,7 +124,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Image scale at which planes are verified (the working width is kept within '
               '64..480 px); the scores were calibrated at 0.25.', 0.05, 1.0),
     ParamSpec('verification.drop_ratio', 0.5, 'float',
-              'A locked plane whose score falls below this fraction of the lock\'s median '
+              "A locked plane whose score falls below this fraction of the lock's median "
               'score is refused and the search starts in the same pair (a cut, a saccade).',
               0.0, 1.0),
     ParamSpec('verification.challenge_period', 10, 'int',
@@ -132,7 +132,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'challenges the lock and replaces it if it explains clearly more (0: never).',
               0, 10000),
     ParamSpec('verification.coarse_candidates', True, 'bool',
-              'Add the coarse photometric alignment\'s planes (DIS optical flow at '
+              "Add the coarse photometric alignment's planes (DIS optical flow at "
               'verification.coarse_width_px, no camera model) to the prior search: covers '
               'rough rigs (roll, vertical offset, focal mismatch) the prior grid misses.'),
     ParamSpec('verification.coarse_width_px', 320, 'int',

@@ -16,6 +16,7 @@ look-alike costs a refinement, not a wrong plane.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
 import cv2
 import numpy as np
 
@@ -158,4 +159,3 @@ def _fit(src: np.ndarray, dst: np.ndarray, threshold_px: float) -> np.ndarray | 
     if h is None or not np.all(np.isfinite(h)) or abs(h[2, 2]) < 1e-12:
         return None
     return h
-

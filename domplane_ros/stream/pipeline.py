@@ -358,7 +358,6 @@ class PlanePipeline:
         """Return the refined, unrejected planes of the coarse photometric alignment."""
         out = []
         for start in self._trust.coarse_candidates(step.left, step.right):
-            step.candidates += 1
             result = problem.estimate(start, self.config.estimator)
             if result.ok and not self._rejection_reason(result, feats, size, bounds=False):
                 out.append(result)
@@ -411,8 +410,7 @@ class PlanePipeline:
     def _search_step(self, step: _Step, feats: Features, problem: TwoStep | FailedEstimate,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
                      ) -> None:
-        """Refine the next few prior candidates; accept the best once enough were tried."""
-        cfg = self.config
+        """Refine the next candidates; publish the best verified plane (TrustGate.pick)."""
         step.reinitialised = True
         if self._search is None:
             self._search = _Search()

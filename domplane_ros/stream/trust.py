@@ -130,7 +130,7 @@ class TrustGate:
         swap = swap_evidence(homography, width, height)
         slope = swap.disparity_slope
         if slope < -MIN_GROUND_SLOPE:
-            return Verdict(False, check, 'left and right cameras appear swapped: the plane\'s '
+            return Verdict(False, check, "left and right cameras appear swapped: the plane's "
                            f'disparity shrinks toward the image bottom ({slope:+.3f} px per '
                            'row); swap the image topics', swapped=True)
         if slope < MIN_GROUND_SLOPE:
@@ -145,7 +145,7 @@ class TrustGate:
         if locked and lock is not None and check.score < self.settings.drop_ratio * lock:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
                            f'below verification.drop_ratio {self.settings.drop_ratio:g} x the '
-                           f'lock\'s {lock:.2f} (the view changed)')
+                           f"lock's {lock:.2f} (the view changed)")
         return Verdict(True, check, '')
 
     def record(self, verdict: Verdict) -> None:

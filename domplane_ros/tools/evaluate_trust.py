@@ -30,10 +30,10 @@ import time
 from typing import Callable, Sequence
 
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
-from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, rough_rig,
-                                   swapped)
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.model import StereoFrame
+from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, rough_rig,
+                                   swapped)
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress
 from domplane_ros.tools.evaluation.methods import run_orb_magsac
@@ -71,9 +71,11 @@ class Tally:
         """Return the markdown table row."""
         precision = self.correct / self.published if self.published else math.nan
         recall = self.correct / self.pairs if self.pairs else math.nan
-        relock = (f'{max(self.relock):.0f}' if self.relock and all(map(math.isfinite,
-                                                                         self.relock))
-                  else ('never' if self.relock else '-'))
+        finite = [r for r in self.relock if math.isfinite(r)]
+        relock = '-' if not self.relock else (
+            f'{max(finite):.0f}' if finite else 'never')
+        if finite and len(finite) < len(self.relock):
+            relock += f' ({len(self.relock) - len(finite)} never)'
         return (f'| {case} | {method} | {self.pairs} | {self.published} | {self.correct} | '
                 f'{self.wrong} | {_pct(precision)} | {_pct(recall)} | {relock} | '
                 f'{np.median(self.times_ms):.1f} |')
@@ -154,7 +156,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     with one_core():
         tallies = _single_cases(seeds, one_shot_search(config), not args.no_orb)
         tallies[('cuts', 'ours')] = _cut_case(seeds[:max(1, args.pairs // 4)], config)
-    lines = [f'machine: {machine_name()}', f'seeds {seeds[0]}..{seeds[-1]} ({"held out" if args.held_out else "tuning"}); '
+    kind = 'held out' if args.held_out else 'tuning'
+    lines = [f'machine: {machine_name()}', f'seeds {seeds[0]}..{seeds[-1]} ({kind}); '
              'prior: the documented default; correct < 1 px, wrong > 5 px',
              '', '| case | method | pairs | published | correct | wrong | precision | '
              'recall | re-lock (max pairs) | median ms |', '|' + '---|' * 10]
