@@ -118,7 +118,7 @@ class VerificationSettings(_Section):
 
     section: ClassVar[str] = 'verification'
 
-    min_score: float = 0.2
+    min_score: float = 0.25
     scale: float = 0.25
     drop_ratio: float = 0.5
     challenge_period: int = 10

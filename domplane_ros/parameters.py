@@ -115,7 +115,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Optional initial homography, 9 values row-major, left pixel to right pixel; '
               'empty means search the prior.', lengths=(0, 9)),
     # Verification (every plane is verified before it is published).
-    ParamSpec('verification.min_score', 0.2, 'float',
+    ParamSpec('verification.min_score', 0.25, 'float',
               'Least verification score (share of the textured image that the plane, and not '
               'the same plane moved 6 px, explains) for a plane to be published; the '
               'confidence is 0.5 there, 0 at min_score - 0.1 and 1 at min_score + 0.1.',
