@@ -24,8 +24,8 @@ __all__ = [
     'ConfigError', 'EstimatorConfig', 'FEATURE_KINDS', 'FeatureConfig', 'HeadConfig',
     'MaskConfig', 'PARAMETERS', 'PARAMETERS_BY_NAME', 'ParamSpec', 'PipelineConfig',
     'PlaneNodeConfig', 'POTENTIAL_NAMES', 'PriorConfig', 'SyncConfig', 'TrackingConfig',
-    'TransportConfig', 'check_value', 'default_params_yaml', 'flatten_params',
-    'load_params_file', 'one_shot_search', 'parameters_markdown',
+    'TransportConfig', 'VerificationSettings', 'check_value', 'default_params_yaml',
+    'flatten_params', 'load_params_file', 'one_shot_search', 'parameters_markdown',
 ]
 
 
@@ -113,6 +113,20 @@ class MaskConfig(_Section):
 
 
 @dataclass(frozen=True)
+class VerificationSettings(_Section):
+    """Plane verification settings (see ``verification.*`` in :data:`PARAMETERS`)."""
+
+    section: ClassVar[str] = 'verification'
+
+    min_score: float = 0.25
+    scale: float = 0.25
+    drop_ratio: float = 0.5
+    challenge_period: int = 10
+    coarse_candidates: bool = True
+    coarse_width_px: int = 320
+
+
+@dataclass(frozen=True)
 class PipelineConfig(_Section):
     """Frame-to-frame policy (see ``pipeline.*`` in :data:`PARAMETERS`)."""
 
@@ -125,7 +139,7 @@ class PipelineConfig(_Section):
     max_clipped_fraction: float = 0.6
     max_stamp_jump_s: float = 10.0
     max_tracking_frames: int = 2
-    search_candidates_per_frame: int = 3
+    search_candidates_per_frame: int = 6
     fast_joint_velocity: float = 0.5
 
 
@@ -200,6 +214,7 @@ class PlaneNodeConfig:
     estimator: EstimatorConfig = field(default_factory=EstimatorConfig)
     prior: PriorConfig = field(default_factory=PriorConfig)
     mask: MaskConfig = field(default_factory=MaskConfig)
+    verification: VerificationSettings = field(default_factory=VerificationSettings)
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     head: HeadConfig = field(default_factory=HeadConfig)
@@ -267,6 +282,7 @@ class PlaneNodeConfig:
             estimator=EstimatorConfig(**section('estimator')),
             prior=PriorConfig(**section('prior')),
             mask=MaskConfig(**section('mask')),
+            verification=VerificationSettings(**section('verification')),
             pipeline=PipelineConfig(**section('pipeline')),
             tracking=TrackingConfig(**section('tracking')),
             head=HeadConfig(**section('head')),

@@ -114,6 +114,29 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('initial_homography', [], 'floats',
               'Optional initial homography, 9 values row-major, left pixel to right pixel; '
               'empty means search the prior.', lengths=(0, 9)),
+    # Verification (every plane is verified before it is published).
+    ParamSpec('verification.min_score', 0.25, 'float',
+              'Least verification score (share of the textured image that the plane, and not '
+              'the same plane moved 6 px, explains) for a plane to be published; the '
+              'confidence is 0.5 there, 0 at min_score - 0.1 and 1 at min_score + 0.1.',
+              0.11, 0.89),
+    ParamSpec('verification.scale', 0.25, 'float',
+              'Image scale at which planes are verified (the working width is kept within '
+              '64..480 px); the scores were calibrated at 0.25.', 0.05, 1.0),
+    ParamSpec('verification.drop_ratio', 0.5, 'float',
+              "A locked plane whose score falls below this fraction of the lock's median "
+              'score is refused and the search starts in the same pair (a cut, a saccade).',
+              0.0, 1.0),
+    ParamSpec('verification.challenge_period', 10, 'int',
+              'Every this many locked pairs the best plane of the coarse photometric alignment '
+              'challenges the lock and replaces it if it explains clearly more (0: never).',
+              0, 10000),
+    ParamSpec('verification.coarse_candidates', True, 'bool',
+              "Add the coarse photometric alignment's planes (DIS optical flow at "
+              'verification.coarse_width_px, no camera model) to the prior search: covers '
+              'rough rigs (roll, vertical offset, focal mismatch) the prior grid misses.'),
+    ParamSpec('verification.coarse_width_px', 320, 'int',
+              'Image width of the coarse photometric alignment, pixels.', 64, 2048),
     # Mask.
     ParamSpec('mask.scale', 0.5, 'float',
               'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),
@@ -150,9 +173,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "Frames in the 'tracking' state (the last homography carried forward through "
               "the cameras' tracked motion) after a failed or suspicious estimate before the "
               'prior search starts.', 0, 100),
-    ParamSpec('pipeline.search_candidates_per_frame', 3, 'int',
-              'Prior candidates refined per frame during a search; a search of '
-              'prior.refine_best candidates is spread over frames, keeping the best so far.',
+    ParamSpec('pipeline.search_candidates_per_frame', 6, 'int',
+              'Prior candidates refined per frame during a search; with prior.refine_best or '
+              'more the whole search fits in one pair, else it is spread over frames, keeping '
+              'the best so far.',
               1, 100),
     ParamSpec('pipeline.fast_joint_velocity', 0.5, 'float',
               'Head joint speed (largest absolute velocity in the joint states, rad/s) above '

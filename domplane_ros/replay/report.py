@@ -19,7 +19,8 @@ CSV_COLUMNS = (
     'stamp_ns', 'ok', 'reinitialised', 'n_left', 'n_right', 'n_inliers', 'iterations',
     'final_energy', 'converged',
     'h00', 'h01', 'h02', 'h10', 'h11', 'h12', 'h20', 'h21', 'h22',
-    'features_ms', 'estimate_ms', 'mask_ms', 'total_ms', 'reason',
+    'features_ms', 'estimate_ms', 'mask_ms', 'total_ms', 'state', 'warm_start', 'confidence',
+    'reason',
 )
 
 
@@ -57,7 +58,7 @@ class CsvOutput:
             *[repr(float(v)) if v != '' else '' for v in h],
             *[f'{timings.get(k, float("nan")):.3f}'
               for k in ('features', 'estimate', 'mask', 'total')],
-            result.reason,
+            result.state, result.warm_start, f'{result.confidence:.3f}', result.reason,
         ])
         self.rows += 1
 

@@ -42,6 +42,8 @@ class FrameResult:
             ``pipeline.search_candidates_per_frame``).
         fast_motion: True if the head's joints moved faster than
             ``pipeline.fast_joint_velocity``.
+        confidence: The published plane's verification confidence in [0, 1] (0.5 at
+            ``verification.min_score``, 1 at 0.1 above it); 0 when no plane was published.
 
     """
 
@@ -63,6 +65,7 @@ class FrameResult:
     prediction: np.ndarray | None = None
     candidates: int = 0
     fast_motion: bool = False
+    confidence: float = 0.0
 
     @property
     def n_inliers(self) -> int:

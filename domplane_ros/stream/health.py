@@ -48,6 +48,8 @@ INPUT_COUNTER_NAMES: dict[str, str] = {
     'degenerate_geometry': 'pairs failed: degenerate geometry',
     'outside_prior': 'pairs failed: homography outside the prior',
     'invalid_homography': 'pairs failed: invalid homography',
+    'unverified_plane': 'pairs failed: no plane verified',
+    'swapped_cameras': 'pairs failed: left and right swapped',
     'stamp_zero': 'stamps zero',
     'stamp_backwards': 'stamps backwards',
     'stamp_jumps': 'stamp jumps forward',

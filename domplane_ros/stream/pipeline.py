@@ -26,6 +26,7 @@ from domplane_ros.core.tracking import camera_motion, predict_plane_homography
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.health import (homography_problem, inlier_spread, InputCounts,
                                         PairChecks, texture_note)
+from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
 
 __all__ = ['FrameResult', 'LOCKED', 'PipelineStats', 'PlanePipeline', 'SEARCHING', 'TRACKING',
@@ -108,6 +109,7 @@ class PlanePipeline:
         self._tracking_frames = 0
         self._search: _Search | None = None
         self._previous: _Previous | None = None
+        self._trust = TrustGate(self.config.verification)
 
     @property
     def last_homography(self) -> np.ndarray | None:
@@ -129,6 +131,8 @@ class PlanePipeline:
             self.reset()
             self._bounds_cache.clear()
             self._candidates_cache.clear()
+        if config.verification != self.config.verification:
+            self._trust = TrustGate(config.verification)
         self.config = config
 
     def reset(self) -> None:
@@ -141,6 +145,7 @@ class PlanePipeline:
         self._tracking_frames = 0
         self._search = None
         self._previous = None
+        self._trust.reset()
 
     def process(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
                 reset: bool = False, joint_speed: float | None = None) -> FrameResult:
@@ -183,7 +188,7 @@ class PlanePipeline:
         track_pts = self._tracking_points(left, right, feats)
         motions = self._camera_motions(left, right)
         t2 = time.perf_counter()
-        step = self._estimate(feats, left.shape, motions, fast)
+        step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
         t3 = time.perf_counter()
         estimate, h, mask = self._publish(step, left, right, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
@@ -201,17 +206,16 @@ class PlanePipeline:
                            warnings=check.warnings, left_lines=feats.left_lines,
                            right_lines=feats.right_lines, warm_start=step.warm_start,
                            prediction=step.prediction, candidates=step.candidates,
-                           fast_motion=fast)
+                           fast_motion=fast, confidence=step.confidence)
 
-    def _estimate(self, feats: Features, shape: tuple[int, int],
+    def _estimate(self, step: _Step, feats: Features,
                   motions: tuple[np.ndarray, np.ndarray] | None, fast: bool) -> _Step:
         """Estimate this frame's plane as the lock state says: warm start, then search."""
-        height, width = shape
+        height, width = step.left.shape
         size = (width, height)
         # One two-step problem per frame: the right set's KD-tree, line matcher and refiner
         # serve every start tried on it (warm, wide, best so far, initial, prior candidates).
         problem = self._problem(feats)
-        step = _Step()
         if self._state != SEARCHING:
             self._track_or_lock(step, feats, problem, size, motions, fast)
         if self._state == SEARCHING:
@@ -314,12 +318,50 @@ class PlanePipeline:
             if not reason:
                 reason = self._input_problem(estimate, feats.left_points, size)
             if not reason:
-                step.accepted = True
-                self._state = LOCKED
-                self._tracking_frames = 0
+                verdict = self._trust.judge(step.left, step.right, estimate.homography,
+                                            self.config.features.roi, locked=True)
+                if not verdict.accepted:
+                    # A verified lock does not slide into a look-alike: search at once.
+                    step.reason = verdict.reason
+                    self._start_search()
+                    return
+                self._verified(step, estimate, verdict)
+                self._challenge(step, problem, feats, size)
                 return
         step.reason = reason
         self._lose_frame(step, prediction)
+
+    def _verified(self, step: _Step, estimate: PlaneEstimate, verdict: Verdict) -> None:
+        """Publish a verified plane: lock on it."""
+        step.estimate, step.accepted, step.confidence = estimate, True, verdict.confidence
+        self._trust.record(verdict)
+        self._state = LOCKED
+        self._search = None
+        self._tracking_frames = 0
+
+    def _challenge(self, step: _Step, problem: TwoStep | FailedEstimate, feats: Features,
+                   size: tuple[int, int]) -> None:
+        """Every few locked pairs, let the coarse alignment's best plane challenge the lock."""
+        if not self._trust.challenge_due() or isinstance(problem, FailedEstimate):
+            return
+        lock = step.estimate
+        pool = [lock] + self._coarse_estimates(step, problem, feats, size)
+        best, verdict, _ = self._trust.pick(step.left, step.right, pool,
+                                            self.config.features.roi)
+        if best is not None and best is not lock and verdict is not None:
+            step.warm_start = 'challenger'
+            self._trust.reset()
+            self._verified(step, best, verdict)
+
+    def _coarse_estimates(self, step: _Step, problem: TwoStep, feats: Features,
+                          size: tuple[int, int]) -> list[PlaneEstimate]:
+        """Return the refined, unrejected planes of the coarse photometric alignment."""
+        out = []
+        for start in self._trust.coarse_candidates(step.left, step.right):
+            result = problem.estimate(start, self.config.estimator)
+            if result.ok and not self._rejection_reason(result, feats, size, bounds=False):
+                out.append(result)
+        return out
 
     def _lose_frame(self, step: _Step, prediction: np.ndarray | None) -> None:
         """Failed or suspicious: carry the plane forward (tracking) or give up (searching)."""
@@ -368,50 +410,72 @@ class PlanePipeline:
     def _search_step(self, step: _Step, feats: Features, problem: TwoStep | FailedEstimate,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
                      ) -> None:
-        """Refine the next few prior candidates; accept the best once enough were tried."""
-        cfg = self.config
+        """Refine the next candidates; publish the best verified plane (TrustGate.pick)."""
         step.reinitialised = True
         if self._search is None:
             self._search = _Search()
             self.stats.reinitialisations += 1
         search = self._search
         reason = self._too_few_reason(feats)
-        if reason:
-            step.reason = reason
+        if reason or isinstance(problem, FailedEstimate):
+            step.reason = reason or problem.reason
             return
+        pool, rejection, limit = self._search_pool(step, search, problem, feats, size, motions)
+        self.stats.candidates += step.candidates
+        step.warm_start = 'search'
+        best, verdict, unverified = self._trust.pick(step.left, step.right, pool,
+                                                     self.config.features.roi)
+        search.best = best.homography if best is not None else None
+        if best is not None and verdict is not None:
+            if best is step.initial:
+                step.warm_start = 'initial'
+            self._verified(step, best, verdict)
+            return
+        if len(search.tried) < limit:
+            step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
+                           'refined')
+            return
+        self._end_search(step, pool, rejection, unverified)
+
+    def _search_pool(self, step: _Step, search: _Search, problem: TwoStep, feats: Features,
+                     size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
+                     ) -> tuple[list[PlaneEstimate], str, int]:
+        """Return this frame's refined candidates, the last rejection and the search's size.
+
+        The pool: the configured initial homography (once per search), the best so far, the
+        next prior candidates by screening energy and the coarse photometric alignment's.
+        """
+        cfg = self.config
+        pool: list[PlaneEstimate] = []
         budget = cfg.pipeline.search_candidates_per_frame
-        best = self._best_so_far(search, problem, feats, size, motions)
         if cfg.initial_homography and not search.initial_tried:
             search.initial_tried = True
             budget -= 1
             step.candidates += 1
-            first = problem if isinstance(problem, FailedEstimate) else problem.estimate(
-                as_homography(cfg.initial_homography, 'initial_homography'), cfg.estimator)
+            first = problem.estimate(as_homography(cfg.initial_homography,
+                                                   'initial_homography'), cfg.estimator)
             if first.ok and not self._rejection_reason(first, feats, size):
-                step.warm_start = 'initial'
-                self._accept_search(step, first)
-                return
-        if isinstance(problem, FailedEstimate):
-            step.reason = problem.reason
-            return
+                pool.append(first)
+                step.initial = first
+        best = self._best_so_far(search, problem, feats, size, motions)
+        if best is not None and best.ok:
+            pool.append(best)
         candidates = self._candidates(size)
         limit = min(cfg.prior.refine_best, candidates.shape[0])
         prior_search = PriorSearch(problem, candidates, cfg.prior.screen_threshold_px)
         chosen = prior_search.ranked(search.tried)[:max(0, min(budget, limit - len(search.tried)))]
         search.tried.update(chosen)
         step.candidates += len(chosen)
-        best, rejection = prior_search.refine(
-            chosen, cfg.estimator, lambda estimate: self._rejection_reason(estimate, feats, size),
-            best)
-        self.stats.candidates += step.candidates
-        step.warm_start = 'search'
-        step.estimate = best
-        search.best = best.homography if best is not None and best.ok else None
-        if len(search.tried) < limit:
-            step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
-                           'refined')
-            return
-        self._end_search(step, best, rejection)
+        rejection = ''
+        for index in chosen:
+            result, rejected = prior_search.refine(
+                [index], cfg.estimator,
+                lambda estimate: self._rejection_reason(estimate, feats, size))
+            rejection = rejected or rejection
+            if result is not None and result.ok:
+                pool.append(result)
+        pool += self._coarse_estimates(step, problem, feats, size)
+        return pool, rejection, limit
 
     def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
@@ -425,26 +489,18 @@ class PlanePipeline:
             return None
         return best
 
-    def _end_search(self, step: _Step, best: PlaneEstimate | FailedEstimate | None,
-                    rejection: str) -> None:
-        """Accept the search's best plane, or fail and start again with the next frame."""
-        if best is not None and best.ok:
-            self._accept_search(step, best)
-            return
-        if best is None and rejection:
+    def _end_search(self, step: _Step, pool: list[PlaneEstimate], rejection: str,
+                    unverified: str) -> None:
+        """No verified plane: say why, and start again with the next frame's features."""
+        if unverified:
+            self.counts.add('swapped_cameras' if 'swapped' in unverified else 'unverified_plane')
+            step.reason = f'search found no verified plane: {unverified}'
+        elif not pool and rejection:
             self._count_rejection(rejection)
             step.reason = f'prior search found no plane: {rejection}'
         else:
-            step.reason = ('prior search found no plane' if best is None else
-                           f'prior search found no plane: {best.reason}')
-        self._search = None  # start again with the next frame's points
-
-    def _accept_search(self, step: _Step, estimate: PlaneEstimate) -> None:
-        step.estimate = estimate
-        step.accepted = True
-        self._state = LOCKED
+            step.reason = 'prior search found no plane'
         self._search = None
-        self._tracking_frames = 0
 
     def _candidates(self, size: tuple[int, int]) -> np.ndarray:
         if size not in self._candidates_cache:
@@ -462,9 +518,13 @@ class PlanePipeline:
         return ''
 
     def _rejection_reason(self, estimate: PlaneEstimate, feats: Features,
-                          size: tuple[int, int]) -> str:
-        """Return why a search result must not be accepted ('' if it may be; not counted)."""
-        return (self._bounds_reason(estimate.homography, size, count=False)
+                          size: tuple[int, int], bounds: bool = True) -> str:
+        """Return why a search result must not be accepted ('' if it may be; not counted).
+
+        ``bounds=False`` skips the prior-bounds check (the coarse alignment's planes need no
+        camera model; the verification and the swap check judge them).
+        """
+        return ((self._bounds_reason(estimate.homography, size, count=False) if bounds else '')
                 or self._input_problem(estimate, feats.left_points, size, count=False))
 
     def _count_rejection(self, reason: str) -> None:
@@ -548,6 +608,10 @@ class _Step:
     candidates: int = 0
     reinitialised: bool = False
     keep_previous: bool = False
+    confidence: float = 0.0
+    initial: PlaneEstimate | None = None
+    left: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
+    right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
 
 
 def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig) -> Features:

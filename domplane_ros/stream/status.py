@@ -113,10 +113,15 @@ def _latency_values(latencies_ms: Sequence[float]) -> list[tuple[str, str]]:
 
 
 def _result_values(result: Any, joint_speed: float | None) -> list[tuple[str, Any]]:
-    """Return the last result's keys, from 'warm start' to 'converged'."""
+    """Return the last result's keys, from 'warm start' to 'converged'.
+
+    'plane confidence' is the published plane's verification confidence in [0, 1] (0.5 at
+    ``verification.min_score``); 0 when no plane was published.
+    """
     ok = result is not None and result.ok
     return [
         ('warm start', (result.warm_start or 'none') if result is not None else 'none'),
+        ('plane confidence', f'{result.confidence:.2f}' if ok else '0.00'),
         ('prior candidates (last frame)', result.candidates if result is not None else 0),
         ('head joint speed [rad/s]', 'n/a' if joint_speed is None else f'{joint_speed:.3f}'),
         ('inliers', result.n_inliers if result is not None else 0),

@@ -15,8 +15,10 @@ def test_replay_refuses_a_frozen_camera_and_counts_it(tmp_path, frames):  # noqa
     stream[6].left = np.zeros_like(stream[6].left)   # a black left frame
     write_bag(tmp_path / 'in', stream)
     summary = run_replay(tmp_path / 'in', tmp_path / 'out')
-    assert summary.input_problems == {'pairs refused: camera frozen': 1,
-                                      'pairs refused: black or saturated': 1}
+    refused = {k: v for k, v in summary.input_problems.items() if k.startswith('pairs refused')}
+    assert refused == {'pairs refused: camera frozen': 1, 'pairs refused: black or saturated': 1}
+    # Besides the two refusals, only the verification may have refused a plane (honestly).
+    assert set(summary.input_problems) - set(refused) <= {'pairs failed: no plane verified'}
     assert any('input problems:  pairs refused: camera frozen 1' in line
                for line in summary.lines())
     bag = read_bag(tmp_path / 'out')['messages']

@@ -1,0 +1,161 @@
+"""Coarse photometric alignment: initial homographies that need no tight camera model.
+
+The prior's grid (:mod:`domplane_ros.core.prior`) only covers heads that match its camera
+model: principal points at the centre, equal focal lengths, no roll, no relative pitch. A
+hand-assembled head breaks that model by a few degrees and a few pixels, which moves every grid
+candidate 10-40 px from the truth, out of the two-step iteration's basin. This module proposes
+candidates from the images themselves, coarse to fine: a dense, pyramidal photometric
+alignment of the left image to the right one (OpenCV's DIS optical flow, Kroeger et al., ECCV
+2016) at a working width of a few hundred pixels, checked forward-backward, to which a
+homography is fitted robustly (MAGSAC++) over the whole image and over its lower part (where a
+floor or road usually is). The candidates then go to the same two-step refinement as the grid's
+and are ranked by the plane's verification, so a flow that followed a wall or a periodic
+look-alike costs a refinement, not a wrong plane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+_PRESETS = {'ultrafast': cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
+            'fast': cv2.DISOPTICAL_FLOW_PRESET_FAST,
+            'medium': cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
+
+
+@dataclass(frozen=True)
+class CoarseConfig:
+    """Settings of the coarse photometric candidates.
+
+    Attributes:
+        width_px: Working width in pixels (the images are reduced to it, never enlarged).
+        preset: DIS optical flow preset: ``'ultrafast'``, ``'fast'`` or ``'medium'``.
+        step_px: Spacing of the flow samples at the working width, pixels.
+        min_gradient: Smoothed gradient magnitude (Sobel, grey levels) below which a sample is
+            too weakly textured to trust its flow.
+        max_forward_backward_px: Largest forward-backward flow disagreement kept, pixels at
+            the working width.
+        threshold_px: MAGSAC++ inlier threshold at the working width, pixels.
+        lower_parts: Top edges (fractions of the height) of the image parts a homography is
+            fitted to; 0.0 is the whole image.
+    """
+
+    width_px: int = 320
+    preset: str = 'medium'
+    step_px: int = 3
+    min_gradient: float = 20.0
+    max_forward_backward_px: float = 0.5
+    threshold_px: float = 1.0
+    lower_parts: tuple[float, ...] = (0.0, 0.5)
+
+    def __post_init__(self) -> None:
+        """Check the values.
+
+        Raises:
+            ValueError: If a value is out of range or the preset is unknown.
+
+        """
+        if self.preset not in _PRESETS:
+            raise ValueError(f'preset must be one of {sorted(_PRESETS)}, got {self.preset!r}')
+        if not 32 <= self.width_px <= 4096:
+            raise ValueError(f'width_px must be in [32, 4096], got {self.width_px}')
+        if self.step_px < 1 or self.threshold_px <= 0 or self.max_forward_backward_px <= 0:
+            raise ValueError('step_px, threshold_px and max_forward_backward_px must be positive')
+        if not all(0.0 <= part < 1.0 for part in self.lower_parts):
+            raise ValueError(f'lower_parts must lie in [0, 1), got {self.lower_parts!r}')
+
+
+class CoarseAligner:
+    """Candidate plane homographies from a dense coarse-to-fine photometric alignment.
+
+    One object per stream: it keeps its DIS optical flow instance (allocated once).
+
+    Args:
+        config: The settings; default :class:`CoarseConfig`.
+
+    """
+
+    def __init__(self, config: CoarseConfig | None = None) -> None:
+        """Create the flow object."""
+        self.config = config or CoarseConfig()
+        self._flow = cv2.DISOpticalFlow_create(_PRESETS[self.config.preset])
+
+    def candidates(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Return candidate left-to-right homographies of the dominant plane.
+
+        Args:
+            left: (H, W) uint8 left image.
+            right: (H, W) uint8 right image (the same size).
+
+        Returns:
+            (K, 3, 3) float64 homographies at full resolution, ``H[2, 2] == 1``; K is 0 when
+            the images give too few trustworthy flow samples.
+
+        Raises:
+            ValueError: If the images are not 2-D uint8 arrays of the same size.
+
+        """
+        if (left.ndim != 2 or left.dtype != np.uint8 or right.shape != left.shape
+                or right.dtype != np.uint8):
+            raise ValueError('left and right must be 2-D uint8 images of the same size, got '
+                             f'{left.shape} {left.dtype} and {right.shape} {right.dtype}')
+        cfg = self.config
+        scale = min(1.0, cfg.width_px / left.shape[1])
+        small_l, small_r = _reduce(left, scale), _reduce(right, scale)
+        src, dst = self._samples(small_l, small_r)
+        to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
+        from_full = np.diag([scale, scale, 1.0])
+        out = []
+        for top in cfg.lower_parts:
+            keep = src[:, 1] >= top * small_l.shape[0]
+            h = _fit(src[keep], dst[keep], cfg.threshold_px)
+            if h is not None:
+                full = to_full @ h @ from_full
+                out.append(full / full[2, 2])
+        return np.stack(out) if out else np.zeros((0, 3, 3))
+
+    def _samples(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Return (N, 2) float32 left samples and their flow targets in the right image."""
+        cfg = self.config
+        forward = self._flow.calc(left, right, None)
+        backward = self._flow.calc(right, left, None)
+        height, width = left.shape
+        ys, xs = np.mgrid[2:height - 2:cfg.step_px, 2:width - 2:cfg.step_px]
+        ys, xs = ys.ravel(), xs.ravel()
+        flow = forward[ys, xs]
+        tx = xs + flow[:, 0]
+        ty = ys + flow[:, 1]
+        back = cv2.remap(backward, tx.reshape(1, -1).astype(np.float32),
+                         ty.reshape(1, -1).astype(np.float32), cv2.INTER_LINEAR).reshape(-1, 2)
+        disagreement = np.hypot(flow[:, 0] + back[:, 0], flow[:, 1] + back[:, 1])
+        grad = _gradient(left)[ys, xs]
+        keep = ((tx >= 0) & (tx <= width - 1) & (ty >= 0) & (ty <= height - 1)
+                & (disagreement < cfg.max_forward_backward_px) & (grad > cfg.min_gradient))
+        src = np.stack([xs[keep], ys[keep]], axis=1).astype(np.float32)
+        dst = np.stack([tx[keep], ty[keep]], axis=1).astype(np.float32)
+        return src, dst
+
+
+def _reduce(image: np.ndarray, scale: float) -> np.ndarray:
+    if scale >= 1.0:
+        return image
+    return cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+
+
+def _gradient(image: np.ndarray) -> np.ndarray:
+    gx = cv2.Sobel(image, cv2.CV_32F, 1, 0)
+    gy = cv2.Sobel(image, cv2.CV_32F, 0, 1)
+    return cv2.GaussianBlur(cv2.magnitude(gx, gy), (5, 5), 0)
+
+
+def _fit(src: np.ndarray, dst: np.ndarray, threshold_px: float) -> np.ndarray | None:
+    """Fit a homography robustly; None if too few samples or no model."""
+    if src.shape[0] < 20:
+        return None
+    h, _ = cv2.findHomography(src, dst, cv2.USAC_MAGSAC, threshold_px, maxIters=2000,
+                              confidence=0.999)
+    if h is None or not np.all(np.isfinite(h)) or abs(h[2, 2]) < 1e-12:
+        return None
+    return h

@@ -1,0 +1,174 @@
+"""Trust: wrong planes published, precision and recall, on cases the product was not tuned on.
+
+Run ``python -m domplane_ros.tools.evaluate_trust [--pairs 40] [--held-out] [--out DIR]``.
+Every case goes through :class:`~domplane_ros.stream.pipeline.PlanePipeline` with the
+documented default configuration (default prior: no range is set from a scene's truth), and
+OpenCV ORB + MAGSAC++ runs on the same pairs in the same run:
+
+* ``cold``: one rendered pair per seed, a fresh pipeline, the whole prior search in that pair
+  (all four floors, planks and tiles included);
+* ``rough``: the same scenes on a rough head (:func:`domplane_ros.sim.rigs.random_rig_error`:
+  roll up to 4 deg, relative pitch up to 2 deg, focal mismatch 3 %, principal points up to
+  10 px apart);
+* ``swapped``: the same scenes with left and right exchanged (truth ``H^-1``);
+* ``cuts``: 8 frames of one sequence then 8 of an unrelated one (scene, floor and set-up),
+  through one pipeline: the frames after the cut, and the pairs to re-lock.
+
+A published plane is *correct* when its mean transfer error over the visible floor is below
+1 px, *wrong* when above 5 px. Precision = correct / published; recall = correct / pairs.
+Tuning seeds start at 0; ``--held-out`` uses seeds from 1000, kept out of tuning.
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+import math
+from pathlib import Path
+import sys
+import time
+from typing import Callable, Sequence
+
+from domplane_ros.config import one_shot_search, PlaneNodeConfig
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.model import StereoFrame
+from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, rough_rig,
+                                   swapped)
+from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.tools.common import machine_name, one_core, progress
+from domplane_ros.tools.evaluation.methods import run_orb_magsac
+import numpy as np
+
+CORRECT_PX = 1.0
+WRONG_PX = 5.0
+CUT_BEFORE = 8
+CUT_AFTER = 8
+PERIOD_NS = 33_333_333
+
+
+@dataclass
+class Tally:
+    """Counts of one case and method."""
+
+    pairs: int = 0
+    published: int = 0
+    correct: int = 0
+    wrong: int = 0
+    times_ms: list[float] = field(default_factory=list)
+    relock: list[float] = field(default_factory=list)
+
+    def add(self, error_px: float | None, time_ms: float) -> None:
+        """Count one pair: ``error_px`` None when nothing was published."""
+        self.pairs += 1
+        self.times_ms.append(time_ms)
+        if error_px is None:
+            return
+        self.published += 1
+        self.correct += int(error_px < CORRECT_PX)
+        self.wrong += int(error_px > WRONG_PX)
+
+    def row(self, case: str, method: str) -> str:
+        """Return the markdown table row."""
+        precision = self.correct / self.published if self.published else math.nan
+        recall = self.correct / self.pairs if self.pairs else math.nan
+        finite = [r for r in self.relock if math.isfinite(r)]
+        relock = '-' if not self.relock else (
+            f'{max(finite):.0f}' if finite else 'never')
+        if finite and len(finite) < len(self.relock):
+            relock += f' ({len(self.relock) - len(finite)} never)'
+        return (f'| {case} | {method} | {self.pairs} | {self.published} | {self.correct} | '
+                f'{self.wrong} | {_pct(precision)} | {_pct(recall)} | {relock} | '
+                f'{np.median(self.times_ms):.1f} |')
+
+
+def _pct(value: float) -> str:
+    return '-' if math.isnan(value) else f'{100 * value:.0f} %'
+
+
+def _ours_single(frame: StereoFrame, config: PlaneNodeConfig) -> tuple[float | None, float]:
+    pipeline = PlanePipeline(config)
+    start = time.perf_counter()
+    result = pipeline.process(frame.left, frame.right, 0)
+    elapsed = 1e3 * (time.perf_counter() - start)
+    return (plane_error_px(frame, result.homography) if result.ok else None), elapsed
+
+
+def _orb_single(frame: StereoFrame) -> tuple[float | None, float]:
+    run = run_orb_magsac(frame.left, frame.right, repeats=1)
+    if run.homography is None:
+        return None, run.time_ms
+    return plane_error_px(frame, run.homography), run.time_ms
+
+
+def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
+                  ) -> dict[tuple[str, str], Tally]:
+    makers: dict[str, Callable[[int], StereoFrame]] = {
+        'cold': random_scene,
+        'rough': lambda s: rough_rig(random_scene(s), random_rig_error(
+            np.random.default_rng((s, 77)))),
+        'swapped': lambda s: swapped(random_scene(s)),
+    }
+    tallies: dict[tuple[str, str], Tally] = {}
+    for case, make in makers.items():
+        for seed in progress(seeds, case):
+            frame = make(seed)
+            error, ms = _ours_single(frame, config)
+            tallies.setdefault((case, 'ours'), Tally()).add(error, ms)
+            if orb:
+                error, ms = _orb_single(frame)
+                tallies.setdefault((case, 'orb_magsac'), Tally()).add(error, ms)
+    return tallies
+
+
+def _cut_case(seeds: Sequence[int], config: PlaneNodeConfig) -> Tally:
+    """Frames after the cut count; relock = pairs after the cut until a correct plane."""
+    tally = Tally()
+    for seed in progress(seeds, 'cuts'):
+        frames = cut_sequence(CUT_BEFORE, CUT_AFTER, seed)
+        pipeline = PlanePipeline(config)
+        relock = math.inf
+        for index, frame in enumerate(frames):
+            start = time.perf_counter()
+            result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+            elapsed = 1e3 * (time.perf_counter() - start)
+            if index < CUT_BEFORE:
+                continue
+            error = plane_error_px(frame, result.homography) if result.ok else None
+            tally.add(error, elapsed)
+            if error is not None and error < CORRECT_PX and math.isinf(relock):
+                relock = index - CUT_BEFORE + 1
+        tally.relock.append(relock)
+    return tally
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the trust evaluation and print its table; return the exit code."""
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--pairs', type=int, default=40, help='seeds per case')
+    parser.add_argument('--held-out', action='store_true',
+                        help='use the held-out seeds (from 1000) instead of the tuning seeds')
+    parser.add_argument('--no-orb', action='store_true', help='skip the ORB + MAGSAC baseline')
+    parser.add_argument('--out', type=Path, default=None, help='write summary.md here too')
+    args = parser.parse_args(argv)
+    first = 1000 if args.held_out else 0
+    seeds = list(range(first, first + args.pairs))
+    config = PlaneNodeConfig()
+    with one_core():
+        tallies = _single_cases(seeds, one_shot_search(config), not args.no_orb)
+        tallies[('cuts', 'ours')] = _cut_case(seeds[:max(1, args.pairs // 4)], config)
+    kind = 'held out' if args.held_out else 'tuning'
+    lines = [f'machine: {machine_name()}', f'seeds {seeds[0]}..{seeds[-1]} ({kind}); '
+             'prior: the documented default; correct < 1 px, wrong > 5 px',
+             '', '| case | method | pairs | published | correct | wrong | precision | '
+             'recall | re-lock (max pairs) | median ms |', '|' + '---|' * 10]
+    lines += [tally.row(case, method) for (case, method), tally in tallies.items()]
+    text = '\n'.join(lines)
+    print(text)
+    if args.out is not None:
+        args.out.mkdir(parents=True, exist_ok=True)
+        (args.out / 'summary.md').write_text(text + '\n')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,32 @@
+"""The coarse photometric alignment proposes planes near the truth, with no camera model."""
+
+from __future__ import annotations
+
+from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.rigs import plane_error_px, RigError, rough_rig
+import numpy as np
+import pytest
+
+
+@pytest.mark.parametrize('seed', [9, 10, 24])
+def test_candidates_come_near_the_truth_on_a_rough_rig(seed):
+    frame = rough_rig(random_scene(seed), RigError(roll_deg=-3.0, pitch_deg=1.0,
+                                                   focal_ratio=0.97))
+    candidates = CoarseAligner().candidates(frame.left, frame.right)
+    assert candidates.shape[1:] == (3, 3) and 1 <= candidates.shape[0] <= 2
+    assert np.all(np.isfinite(candidates))
+    assert min(plane_error_px(frame, h) for h in candidates) < 5.0
+
+
+def test_textureless_images_give_no_candidate():
+    flat = np.full((120, 160), 128, np.uint8)
+    assert CoarseAligner().candidates(flat, flat).shape == (0, 3, 3)
+
+
+def test_bad_input_is_refused_naming_it():
+    aligner = CoarseAligner()
+    with pytest.raises(ValueError, match='same size'):
+        aligner.candidates(np.zeros((10, 10), np.uint8), np.zeros((10, 12), np.uint8))
+    with pytest.raises(ValueError, match='preset'):
+        CoarseConfig(preset='slowest')

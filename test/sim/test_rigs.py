@@ -1,0 +1,59 @@
+"""Rough rigs, swaps and cuts: the truth they carry is exact."""
+
+from __future__ import annotations
+
+from domplane_ros.core.homography import apply_homography
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, rig_warp, RigError, rough_rig,
+                                   swapped)
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return random_scene(2, width=320, height=240)
+
+
+def test_no_rig_error_is_the_identity(scene):
+    assert np.allclose(rig_warp(RigError(), 500.0, 320, 240), np.eye(3))
+    same = rough_rig(scene, RigError())
+    assert np.allclose(same.homography, scene.homography)
+    assert plane_error_px(same, scene.homography) == pytest.approx(0.0, abs=1e-9)
+
+
+def test_rough_rig_truth_matches_its_images(scene):
+    error = RigError(roll_deg=3.0, pitch_deg=1.5, focal_ratio=1.03, principal_offset_px=(8, -6))
+    rough = rough_rig(scene, error)
+    g = rig_warp(error, scene.setup.focal_px, 320, 240)
+    assert np.allclose(rough.homography, g @ scene.homography / (g @ scene.homography)[2, 2])
+    # A floor pixel's grey level in the rough right image is where the truth sends it.
+    pts = np.argwhere(rough.plane_left & rough.visible_in_right)[::97, ::-1].astype(float)
+    new = apply_homography(rough.homography, pts)
+    old = apply_homography(scene.homography, pts)
+    inside = ((new[:, 0] > 2) & (new[:, 0] < 317) & (new[:, 1] > 2) & (new[:, 1] < 237)
+              & (old[:, 0] > 2) & (old[:, 0] < 317) & (old[:, 1] > 2) & (old[:, 1] < 237))
+    a = rough.right[new[inside, 1].round().astype(int), new[inside, 0].round().astype(int)]
+    b = scene.right[old[inside, 1].round().astype(int), old[inside, 0].round().astype(int)]
+    assert np.median(np.abs(a.astype(int) - b.astype(int))) <= 12
+    # The prior's model error is tens of pixels, not a rounding.
+    assert plane_error_px(rough, scene.homography) > 10.0
+
+
+def test_swapping_twice_gives_the_truth_back(scene):
+    twice = swapped(swapped(scene))
+    assert np.allclose(twice.homography, scene.homography, atol=1e-9)
+    assert np.array_equal(swapped(scene).left, scene.right)
+
+
+def test_bad_rig_error_is_refused():
+    with pytest.raises(ValueError, match='focal_ratio'):
+        RigError(focal_ratio=0.0)
+    with pytest.raises(ValueError, match='finite'):
+        RigError(roll_deg=float('nan'))
+
+
+def test_cut_joins_two_unrelated_sequences():
+    frames = cut_sequence(2, 2, seed=1, width=160, height=120)
+    assert len(frames) == 4
+    assert not np.allclose(frames[1].homography, frames[2].homography, atol=1.0)

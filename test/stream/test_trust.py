@@ -1,0 +1,103 @@
+"""Verify, then publish: the trust gate and the pipeline on cuts, swaps and rough rigs.
+
+Ground truth comes from the renderer; the rough rigs and swaps from :mod:`domplane_ros.sim.rigs`.
+Every configuration here is the documented default (no prior built from a scene's truth).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from domplane_ros.config import PlaneNodeConfig, VerificationSettings
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.rigs import cut_sequence, plane_error_px, RigError, rough_rig, swapped
+from domplane_ros.stream import trust as trust_module
+from domplane_ros.stream.pipeline import LOCKED, PlanePipeline
+from domplane_ros.stream.trust import TrustGate
+import numpy as np
+import pytest
+
+PERIOD_NS = 33_333_333
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return random_scene(3)
+
+
+def _shifted(h: np.ndarray, dx: float, dy: float = 0.0) -> np.ndarray:
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ h
+
+
+def test_true_plane_passes_and_shifted_planes_do_not(scene):
+    gate = TrustGate(VerificationSettings())
+    true = gate.judge(scene.left, scene.right, scene.homography)
+    assert true.accepted and true.confidence > 0.5, true.reason
+    for dx, dy in ((8.0, 0.0), (0.0, 8.0), (25.0, 0.0)):
+        wrong = gate.judge(scene.left, scene.right, _shifted(scene.homography, dx, dy))
+        assert not wrong.accepted and 'not verified' in wrong.reason
+        assert wrong.score < true.score
+
+
+def test_swapped_cameras_are_named(scene):
+    pair = swapped(scene)
+    gate = TrustGate(VerificationSettings())
+    verdict = gate.judge(pair.left, pair.right, pair.homography)
+    assert not verdict.accepted and verdict.swapped
+    assert 'swapped' in verdict.reason
+    # The same plane on the pair as given is a ground plane and passes.
+    assert gate.judge(scene.left, scene.right, scene.homography).accepted
+
+
+def test_a_plane_facing_the_camera_is_not_taken_for_the_ground(scene):
+    gate = TrustGate(VerificationSettings())
+    # A pure translation has no disparity gradient: a fronto-parallel plane (a wall).
+    verdict = gate.judge(scene.left, scene.right, _shifted(np.eye(3), -20.0))
+    assert not verdict.accepted and 'not a ground plane' in verdict.reason
+
+
+def test_a_lock_whose_score_collapses_is_refused(scene, monkeypatch):
+    gate = TrustGate(VerificationSettings(drop_ratio=0.5))
+    first = gate.judge(scene.left, scene.right, scene.homography, locked=True)
+    gate.record(first)
+    weaker = first.verification.__class__(**{**first.verification.__dict__,
+                                             'score': 0.4 * first.score})
+    monkeypatch.setattr(trust_module, 'verify_plane', lambda *a, **k: weaker)
+    verdict = gate.judge(scene.left, scene.right, scene.homography, locked=True)
+    assert not verdict.accepted and 'view changed' in verdict.reason
+    # Not locked (a new search): the absolute threshold alone applies.
+    assert gate.judge(scene.left, scene.right, scene.homography).accepted == weaker.accepted
+
+
+@pytest.mark.parametrize('seed', [0, 1, 3])
+def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
+    frames = cut_sequence(6, 6, seed)
+    pipeline = PlanePipeline()
+    results = [pipeline.process(f.left, f.right, i * PERIOD_NS) for i, f in enumerate(frames)]
+    errors = [plane_error_px(f, r.homography) if r.ok else None
+              for f, r in zip(frames, results)]
+    assert all(e is None or e < 5.0 for e in errors), errors
+    after = errors[6:]
+    relock = next(i for i, e in enumerate(after) if e is not None and e < 1.0)
+    assert relock < 3, errors
+    assert results[6 + relock].state == LOCKED and results[6 + relock].confidence >= 0.5
+
+
+def test_swapped_pair_is_refused_by_name_not_published():
+    pair = swapped(random_scene(4))
+    result = PlanePipeline().process(pair.left, pair.right, 0)
+    assert not result.ok and result.homography is None and not result.mask.any()
+    assert 'swapped' in result.reason, result.reason
+    assert result.confidence == 0.0
+
+
+def test_rough_rig_outside_the_prior_model_is_solved_by_the_coarse_alignment():
+    frame = rough_rig(random_scene(9), RigError(roll_deg=3.0, pitch_deg=1.5, focal_ratio=1.03,
+                                                principal_offset_px=(7.0, -7.0)))
+    result = PlanePipeline().process(frame.left, frame.right, 0)
+    assert result.ok, result.reason
+    assert plane_error_px(frame, result.homography) < 1.0
+    # Without the coarse alignment the prior grid alone: no wrong plane either way.
+    off = replace(PlaneNodeConfig(), verification=VerificationSettings(coarse_candidates=False))
+    without = PlanePipeline(off).process(frame.left, frame.right, 0)
+    assert not without.ok or plane_error_px(frame, without.homography) < 5.0
