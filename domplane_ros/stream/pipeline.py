@@ -13,19 +13,19 @@ from dataclasses import dataclass, field, replace
 import math
 import time
 
-from domplane_ros.config import PlaneNodeConfig, PriorConfig
+from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
-from domplane_ros.core.features import detect_corners, Features, roi_to_pixels
-from domplane_ros.core.homography import apply_homography, as_homography
+from domplane_ros.core.features import detect_corners, Features
+from domplane_ros.core.homography import as_homography
 from domplane_ros.core.image import check_gray
-from domplane_ros.core.lines import detect_lines, endpoints
+from domplane_ros.core.lines import detect_lines
 from domplane_ros.core.mask import plane_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import camera_motion, predict_plane_homography
+from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.frame import debug_overlay, FrameResult
-from domplane_ros.stream.health import (homography_problem, inlier_spread, InputCounts,
-                                        PairChecks, texture_note)
+from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
 
@@ -37,9 +37,6 @@ LOCKED = 'locked'        # the last frame gave a plane; the next one warm-starts
 TRACKING = 'tracking'    # an estimate failed; the last plane is carried through the motion
 SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidates per frame
 
-# Margin (fraction of the image diagonal) around the image-corner positions that the prior's
-# candidates reach; a homography moving a corner beyond it violates the prior.
-_PRIOR_BOUNDS_MARGIN = 0.15
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
 _WIDE_BASIN_FACTOR = 4.0
@@ -103,7 +100,7 @@ class PlanePipeline:
         self._last_energy_per_point: float | None = None
         self.counts = counts if counts is not None else InputCounts()
         self.checks = PairChecks(self.counts)
-        self._bounds_cache: dict[tuple[int, int], tuple[np.ndarray, np.ndarray]] = {}
+        self._checks = AcceptanceChecks(self.counts, lambda: self.config)
         self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
         self._state = SEARCHING
         self._tracking_frames = 0
@@ -129,7 +126,7 @@ class PlanePipeline:
         if (config.prior != self.config.prior
                 or config.initial_homography != self.config.initial_homography):
             self.reset()
-            self._bounds_cache.clear()
+            self._checks.clear()
             self._candidates_cache.clear()
         if config.verification != self.config.verification:
             self._trust = TrustGate(config.verification)
@@ -296,7 +293,7 @@ class PlanePipeline:
                        fast: bool) -> None:
         assert self._last_h is not None
         prediction = self._propagate(self._last_h, motions)
-        if prediction is not None and self._bounds_reason(prediction, size, count=False):
+        if prediction is not None and self._checks.bounds_reason(prediction, size, count=False):
             prediction = None
         step.prediction = prediction
         if prediction is not None:
@@ -305,7 +302,7 @@ class PlanePipeline:
         # is stale, and a stale start can slide into a look-alike.
         starts = [('prediction', prediction) if prediction is not None
                   else ('last', self._last_h)]
-        reason = self._too_few_reason(feats)
+        reason = self._checks.too_few_reason(feats)
         for name, init in starts if not reason else ():
             wide = fast and prediction is None
             estimate = self._warm_estimate(problem, init, wide)
@@ -314,9 +311,10 @@ class PlanePipeline:
                 reason = estimate.reason
                 continue
             # A fast head (joint input) may change the energy legitimately: no energy check.
-            reason = self._suspicion_reason(estimate, feats.n_left, size, energy=not fast)
+            reason = self._checks.suspicion_reason(estimate, feats.n_left, size,
+                                                   self._last_energy_per_point, energy=not fast)
             if not reason:
-                reason = self._input_problem(estimate, feats.left_points, size)
+                reason = self._checks.input_problem(estimate, feats.left_points, size)
             if not reason:
                 verdict = self._trust.judge(step.left, step.right, estimate.homography,
                                             self.config.features.roi, locked=True)
@@ -359,7 +357,7 @@ class PlanePipeline:
         out = []
         for start in self._trust.coarse_candidates(step.left, step.right):
             result = problem.estimate(start, self.config.estimator)
-            if result.ok and not self._rejection_reason(result, feats, size, bounds=False):
+            if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)
         return out
 
@@ -416,7 +414,7 @@ class PlanePipeline:
             self._search = _Search()
             self.stats.reinitialisations += 1
         search = self._search
-        reason = self._too_few_reason(feats)
+        reason = self._checks.too_few_reason(feats)
         if reason or isinstance(problem, FailedEstimate):
             step.reason = reason or problem.reason
             return
@@ -454,7 +452,7 @@ class PlanePipeline:
             step.candidates += 1
             first = problem.estimate(as_homography(cfg.initial_homography,
                                                    'initial_homography'), cfg.estimator)
-            if first.ok and not self._rejection_reason(first, feats, size):
+            if first.ok and not self._checks.rejection_reason(first, feats, size):
                 pool.append(first)
                 step.initial = first
         best = self._best_so_far(search, problem, feats, size, motions)
@@ -470,7 +468,7 @@ class PlanePipeline:
         for index in chosen:
             result, rejected = prior_search.refine(
                 [index], cfg.estimator,
-                lambda estimate: self._rejection_reason(estimate, feats, size))
+                lambda estimate: self._checks.rejection_reason(estimate, feats, size))
             rejection = rejected or rejection
             if result is not None and result.ok:
                 pool.append(result)
@@ -485,7 +483,7 @@ class PlanePipeline:
             return None
         start = self._propagate(search.best, motions)
         best = self._warm_estimate(problem, start if start is not None else search.best, False)
-        if best.ok and self._rejection_reason(best, feats, size):
+        if best.ok and self._checks.rejection_reason(best, feats, size):
             return None
         return best
 
@@ -496,7 +494,7 @@ class PlanePipeline:
             self.counts.add('swapped_cameras' if 'swapped' in unverified else 'unverified_plane')
             step.reason = f'search found no verified plane: {unverified}'
         elif not pool and rejection:
-            self._count_rejection(rejection)
+            self._checks.count_rejection(rejection)
             step.reason = f'prior search found no plane: {rejection}'
         else:
             step.reason = 'prior search found no plane'
@@ -506,94 +504,6 @@ class PlanePipeline:
         if size not in self._candidates_cache:
             self._candidates_cache[size] = prior_candidates(self.config.prior, *size)
         return self._candidates_cache[size]
-
-    # --- Checks ----------------------------------------------------------------------------
-    def _too_few_reason(self, feats: Features) -> str:
-        """Return why the features are too few to try an estimate ('' if they are enough)."""
-        min_inliers = self.config.estimator.min_inliers
-        if feats.n_left < min_inliers:
-            return f'too few left features: {feats.n_left} < min_inliers {min_inliers}'
-        if feats.n_right < 4:
-            return f'too few right features: {feats.n_right}'
-        return ''
-
-    def _rejection_reason(self, estimate: PlaneEstimate, feats: Features,
-                          size: tuple[int, int], bounds: bool = True) -> str:
-        """Return why a search result must not be accepted ('' if it may be; not counted).
-
-        ``bounds=False`` skips the prior-bounds check (the coarse alignment's planes need no
-        camera model; the verification and the swap check judge them).
-        """
-        return ((self._bounds_reason(estimate.homography, size, count=False) if bounds else '')
-                or self._input_problem(estimate, feats.left_points, size, count=False))
-
-    def _count_rejection(self, reason: str) -> None:
-        """Count a search's final rejection reason once, under its kind."""
-        for needle, key in (('outside the prior', 'outside_prior'),
-                            ('degenerate geometry', 'degenerate_geometry')):
-            if needle in reason:
-                self.counts.add(key)
-                return
-        self.counts.add('invalid_homography')
-
-    def _input_problem(self, estimate: PlaneEstimate, left_pts: np.ndarray,
-                       size: tuple[int, int], count: bool = True) -> str:
-        """Return why a converged estimate must not be published ('' if it may be)."""
-        problem = homography_problem(estimate.homography)
-        if problem:
-            if count:
-                self.counts.add('invalid_homography')
-            return problem
-        min_spread = self.config.pipeline.min_inlier_spread
-        if min_spread > 0:
-            x0, y0, x1, y1 = roi_to_pixels(self.config.features.roi, *size)
-            # Inlier corners and the endpoints of inlier segments.
-            inliers = np.concatenate([
-                left_pts[estimate.inliers],
-                endpoints(estimate.left_lines[estimate.line_inliers])])
-            spread = inlier_spread(inliers, float((x1 - x0) * (y1 - y0)))
-            if spread < min_spread:
-                if count:
-                    self.counts.add('degenerate_geometry')
-                return (f'degenerate geometry: the inliers span {100 * spread:.2f} % of the '
-                        f'region of interest (< pipeline.min_inlier_spread {min_spread:g}); '
-                        'collinear or packed in one patch, they do not constrain the plane')
-        return ''
-
-    def _suspicion_reason(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
-                          energy: bool = True) -> str:
-        """Return why an estimate should not be trusted ('' if it can be)."""
-        cfg = self.config.pipeline
-        if energy and self._last_energy_per_point is not None:
-            per_point = estimate.final_energy / max(n_points, 1)
-            limit = cfg.max_energy_ratio * max(self._last_energy_per_point, 1e-3)
-            if per_point > limit:
-                return (f'energy jump: {per_point:.3g} per point > {cfg.max_energy_ratio} x '
-                        f'last {self._last_energy_per_point:.3g}')
-        return self._bounds_reason(estimate.homography, size)
-
-    def _bounds_reason(self, homography: np.ndarray, size: tuple[int, int],
-                       count: bool = True) -> str:
-        """Return why a homography is outside the prior ('' if it is inside or unchecked)."""
-        if self.config.pipeline.check_prior_bounds:
-            low, high = self._prior_bounds(size)
-            corners = _image_corners(*size)
-            mapped = apply_homography(homography, corners)
-            if np.any(mapped < low) or np.any(mapped > high):
-                if count:
-                    self.counts.add('outside_prior')
-                return 'homography outside the prior: an image corner maps beyond its range'
-        return ''
-
-    def _prior_bounds(self, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
-        if size not in self._bounds_cache:
-            cands = prior_candidates(_bounds_prior(self.config.prior), *size)
-            corners = _image_corners(*size)
-            mapped = np.stack([apply_homography(h, corners) for h in cands])
-            margin = _PRIOR_BOUNDS_MARGIN * float(np.hypot(*size))
-            self._bounds_cache[size] = (mapped.min(axis=0) - margin,
-                                        mapped.max(axis=0) + margin)
-        return self._bounds_cache[size]
 
 
 @dataclass
@@ -644,13 +554,3 @@ def _check_frame(left: np.ndarray, right: np.ndarray, joint_speed: float | None)
     check_gray(right, 'right')
     if joint_speed is not None and not math.isfinite(joint_speed):
         raise ValueError(f'joint_speed must be finite, got {joint_speed!r}')
-
-
-def _bounds_prior(prior: PriorConfig) -> PriorConfig:
-    """Return the prior sampled at its range ends and middle, for the bounds check."""
-    return replace(prior, samples=3)
-
-
-def _image_corners(width: int, height: int) -> np.ndarray:
-    return np.array([[0.0, 0.0], [width - 1.0, 0.0], [width - 1.0, height - 1.0],
-                     [0.0, height - 1.0]])
