@@ -268,12 +268,14 @@ class StreamSession:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,
                                            reset=pair.after_reset, joint_speed=joint_speed)
         frame = ProcessedPair(pair, result, left, 1e3 * (time.perf_counter() - t0))
+        # Recorded before publishing, so a status built meanwhile (the diagnostics timer)
+        # never shows the pipeline's new lock state beside no result.
+        self.last_result = result
         self._count(frame)
         if publish is not None:
             publish(frame)
         self.latencies_ms.append(1e3 * (time.perf_counter() - t0))
         self.counters.processed += 1
-        self.last_result = result
         return frame
 
     def _decode_failed(self, err: ImageDecodeError) -> None:
