@@ -324,7 +324,7 @@ class PlanePipeline:
                     self._start_search()
                     return
                 self._verified(step, estimate, verdict)
-                self._challenge(step, problem, feats, size)
+                self._challenge(step, verdict, problem, feats, size)
                 return
         step.reason = reason
         self._lose_frame(step, prediction)
@@ -337,16 +337,18 @@ class PlanePipeline:
         self._search = None
         self._tracking_frames = 0
 
-    def _challenge(self, step: _Step, problem: TwoStep | FailedEstimate, feats: Features,
-                   size: tuple[int, int]) -> None:
-        """Every few locked pairs, let the coarse alignment's best plane challenge the lock."""
+    def _challenge(self, step: _Step, lock: Verdict, problem: TwoStep | FailedEstimate,
+                   feats: Features, size: tuple[int, int]) -> None:
+        """Every few locked pairs, let the coarse alignment's best plane challenge the lock.
+
+        The lock was verified in this pair already (``lock``); only the challengers are.
+        """
         if not self._trust.challenge_due() or isinstance(problem, FailedEstimate):
             return
-        lock = step.estimate
-        pool = [lock] + self._coarse_estimates(step, problem, feats, size)
+        pool = self._coarse_estimates(step, problem, feats, size)
         best, verdict, _ = self._trust.pick(step.left, step.right, pool,
                                             self.config.features.roi)
-        if best is not None and best is not lock and verdict is not None:
+        if best is not None and verdict is not None and self._trust.beats(verdict, lock):
             step.warm_start = 'challenger'
             self._trust.reset()
             self._verified(step, best, verdict)

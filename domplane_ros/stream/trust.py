@@ -39,6 +39,9 @@ MIN_GROUND_SLOPE = 0.02
 # cameras on the same pair; else the swapped plane explains the image and the others are its
 # look-alikes (measured: the true plane outscores its look-alikes on 398 of 400 pairs).
 SWAP_DOMINANCE = 1.0
+# A challenger replaces the lock only if its score is this many times the lock's: a plane a
+# fraction of a pixel away scores about the same and must not churn the lock.
+CHALLENGE_MARGIN = 1.2
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -206,5 +209,9 @@ class TrustGate:
             return None, None, max(swapped, key=lambda v: v.score).reason
         if not reasons:
             return None, None, ''
-        worst = max(reasons, key=lambda v: v.score)
-        return None, None, worst.reason
+        closest = max(reasons, key=lambda v: v.score)
+        return None, None, closest.reason
+
+    def beats(self, challenger: Verdict, lock: Verdict) -> bool:
+        """Return whether a challenger explains clearly more of the image than the lock."""
+        return challenger.accepted and challenger.score > CHALLENGE_MARGIN * lock.score

@@ -101,3 +101,18 @@ def test_rough_rig_outside_the_prior_model_is_solved_by_the_coarse_alignment():
     off = replace(PlaneNodeConfig(), verification=VerificationSettings(coarse_candidates=False))
     without = PlanePipeline(off).process(frame.left, frame.right, 0)
     assert not without.ok or plane_error_px(frame, without.homography) < 5.0
+
+
+def test_a_challenger_needs_clearly_more_than_the_lock(scene):
+    gate = TrustGate(VerificationSettings())
+    lock = gate.judge(scene.left, scene.right, scene.homography)
+    assert lock.accepted
+
+    def scored(score: float):
+        check = lock.verification.__class__(**{**lock.verification.__dict__, 'score': score})
+        return trust_module.Verdict(True, check, '')
+
+    assert not gate.beats(scored(1.1 * lock.score), lock)
+    assert gate.beats(scored(1.3 * lock.score), lock)
+    assert not gate.beats(trust_module.Verdict(False, scored(2 * lock.score).verification,
+                                               'refused'), lock)
