@@ -52,6 +52,7 @@ class FeatureConfig(_Section):
     grid_rows: int = 4
     grid_cols: int = 4
     roi: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
+    max_width: int = 1280
     kind: str = 'points'
     max_lines: int = 150
     min_line_length_px: float = 25.0

@@ -54,6 +54,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('features.roi', [0.0, 0.0, 1.0, 1.0], 'floats',
               'Region of interest in the left image as fractions [x0, y0, x1, y1] '
               '(0..1, x0 < x1, y0 < y1).', 0.0, 1.0, lengths=(4,)),
+    ParamSpec('features.max_width', 1280, 'int',
+              'Working resolution: corners and lines are detected and corners tracked on the '
+              'Gaussian pyramid level (halvings) whose width is at most this, then corners are '
+              'refined on the full image; features.* pixel sizes are at that level. 0: full '
+              'resolution.', 0, 100000),
     ParamSpec('features.kind', 'points', 'str',
               'Features the plane is estimated from: points (corners), lines (straight line '
               'segments) or both.', choices=FEATURE_KINDS),
