@@ -152,7 +152,7 @@ class TrackingConfig(_Section):
 
     enabled: bool = True
     max_points: int = 150
-    window_px: int = 15
+    window_px: int = 11
     pyramid_levels: int = 3
     forward_backward_px: float = 1.0
     min_tracks: int = 20

@@ -196,8 +196,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "Most corners tracked per camera (the previous frame's first, i.e. strongest "
               'per grid cell).',
               8, 5000),
-    ParamSpec('tracking.window_px', 15, 'int',
-              'Side of the pyramidal Lucas-Kanade window, pixels.', 5, 101),
+    ParamSpec('tracking.window_px', 11, 'int',
+              'Side of the pyramidal Lucas-Kanade window, pixels at the working resolution '
+              '(features.max_width).', 5, 101),
     ParamSpec('tracking.pyramid_levels', 3, 'int',
               'Pyramid levels of the Lucas-Kanade tracker above full resolution.', 0, 8),
     ParamSpec('tracking.forward_backward_px', 1.0, 'float',

@@ -93,3 +93,19 @@ def motion_to_full(motion: np.ndarray, scale: float) -> np.ndarray:
         return motion
     s = scale_matrix(scale)
     return s @ motion @ np.diag([1.0 / scale, 1.0 / scale, 1.0])
+
+
+def level_homography(homography: np.ndarray, scale: float) -> np.ndarray:
+    """Return a full-pixel plane homography between working-level images: ``S^-1 H S``.
+
+    Args:
+        homography: (3, 3) float64 left-to-right homography in full pixels.
+        scale: Full pixels per working pixel.
+
+    Returns:
+        (3, 3) float64 the same plane's homography in working pixels.
+
+    """
+    if scale == 1.0:
+        return homography
+    return motion_to_full(homography, 1.0 / scale)

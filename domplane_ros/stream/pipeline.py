@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import math
 import time
 
+import cv2
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import detect_corners, Features
@@ -21,7 +22,7 @@ from domplane_ros.core.image import check_gray
 from domplane_ros.core.lines import detect_lines
 from domplane_ros.core.mask import plane_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
-from domplane_ros.core.pyramid import motion_to_full, WorkingImage
+from domplane_ros.core.pyramid import level_homography, motion_to_full, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import camera_motion, predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
@@ -190,7 +191,7 @@ class PlanePipeline:
         t2 = time.perf_counter()
         step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
         t3 = time.perf_counter()
-        estimate, h, mask = self._publish(step, left, right, feats)
+        estimate, h, mask = self._publish(step, *work, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
             self.counts.add('too_few_features')
@@ -223,19 +224,24 @@ class PlanePipeline:
             self._search_step(step, feats, problem, size, motions)
         return step
 
-    def _publish(self, step: _Step, left: np.ndarray, right: np.ndarray, feats: Features
+    def _publish(self, step: _Step, left: WorkingImage, right: WorkingImage, feats: Features
                  ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray]:
-        """Return the frame's estimate, homography and mask; keep an accepted plane."""
+        """Return the frame's estimate, homography and mask; keep an accepted plane.
+
+        The mask is computed on the working level (``mask.scale`` of it) and scaled up to the
+        full image, so its cost grows with the working resolution, not the camera's.
+        """
         estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
         if step.accepted:
             h = estimate.homography
-            mask = plane_mask(left, right, h, self.config.mask)
+            mask = _full_mask(left, plane_mask(left.image, right.image,
+                                               level_homography(h, left.scale), self.config.mask))
             self._last_h = h
             self._last_energy_per_point = estimate.final_energy / max(feats.n_left, 1)
             self.stats.succeeded += 1
         else:
             h = None
-            mask = np.zeros(left.shape, np.uint8)
+            mask = np.zeros(left.full.shape, np.uint8)
             self.stats.failed += 1
         return estimate, h, mask
 
@@ -564,6 +570,14 @@ def _detect(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfig
 def _full_corners(image: WorkingImage, corners: np.ndarray) -> np.ndarray:
     """Return working-level corners in full pixels."""
     return corners if image.level == 0 else image.scale * corners
+
+
+def _full_mask(image: WorkingImage, mask: np.ndarray) -> np.ndarray:
+    """Return a working-level mask at the full image's size (nearest neighbour)."""
+    if image.level == 0:
+        return mask
+    height, width = image.full.shape
+    return cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)
 
 
 def _timings_ms(t0: float, t1: float, t2: float, t3: float, t4: float) -> dict[str, float]:

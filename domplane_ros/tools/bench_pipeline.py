@@ -25,6 +25,7 @@ A PNG bar chart of the medians (p95 as whiskers) is written to ``--out``.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+import functools
 from pathlib import Path
 import sys
 import time
@@ -94,11 +95,15 @@ def _bench_frames(frames: list, scale: int) -> list[BenchFrame]:
     return out
 
 
+@functools.lru_cache(maxsize=4)
+def _rendered(n_frames: int, seed: int, width: int, height: int) -> list:
+    return scene_sequence(n_frames, seed, width=width, height=height, floor='random')
+
+
 def sequence(width: int, height: int, n_frames: int, seed: int) -> tuple[list[BenchFrame], Any]:
     """Return a rendered moving sequence at ``width`` x ``height`` and its camera set-up."""
     scale = max(1, int(round(width / _RENDER_LIMIT[0])))
-    frames = scene_sequence(n_frames, seed, width=width // scale, height=height // scale,
-                            floor='random')
+    frames = _rendered(n_frames, seed, width // scale, height // scale)
     return _bench_frames(frames, scale), frames[0].setup
 
 
@@ -324,7 +329,7 @@ def bench_dds(seconds: float, rate_hz: float, width: int, height: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the pipeline benchmark, print its rows and write the bar chart."""
     parser = tool_parser(__doc__)
-    parser.add_argument('--frames', type=int, default=40, help='frames per warm sequence')
+    parser.add_argument('--frames', type=int, default=30, help='frames per warm sequence')
     parser.add_argument('--cold-pairs', type=int, default=10, help='rendered cold-start pairs')
     parser.add_argument('--sizes', default='640x480,1280x720,3840x2160',
                         help='comma-separated warm sizes WxH')
