@@ -22,6 +22,7 @@ from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETER
 from domplane_ros.ros.handover import NewestSlot
 from domplane_ros.ros.messages import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros.messages import READ_ONLY
+from domplane_ros.ros.startup import check_params_files, init_rclpy
 from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.stream.session import ProcessedPair, SIDES, StreamSession
@@ -41,7 +42,6 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data,
 from sensor_msgs.msg import Image, JointState
 from std_msgs.msg import Float64MultiArray
 
-_EMPTY_ARRAY_KINDS = {'floats': Parameter.Type.DOUBLE_ARRAY}
 _THROTTLE_S = 5.0
 
 
@@ -130,8 +130,8 @@ class PlaneNode(Node):
         values: dict[str, Any] = {}
         for spec in PARAMETERS:
             default: Any = spec.default
-            if spec.kind in _EMPTY_ARRAY_KINDS and not default:
-                default = _EMPTY_ARRAY_KINDS[spec.kind]
+            if isinstance(default, list) and not default:
+                default = None   # unset: an empty list has no type to declare
             try:
                 param = self.declare_parameter(spec.name, default, descriptor(spec))
             except (InvalidParameterTypeException, InvalidParameterValueException,
@@ -167,8 +167,11 @@ class PlaneNode(Node):
             if param.name in READ_ONLY:
                 return SetParametersResult(
                     successful=False, reason=f'{param.name!r} only takes effect at start-up')
+            value = _plain(param.value)
+            if value is None and isinstance(spec.default, list):
+                value = []   # unset again: back to the default, empty
             try:
-                trial[param.name] = check_value(spec, _plain(param.value))
+                trial[param.name] = check_value(spec, value)
             except ConfigError as err:
                 return SetParametersResult(successful=False, reason=str(err))
         try:
@@ -312,11 +315,13 @@ def main(args: list[str] | None = None) -> int:
     """Run plane_node until Ctrl-C or an external shutdown.
 
     Returns:
-        0 on a clean shutdown, 2 on an invalid parameter.
+        0 on a clean shutdown (Ctrl-C included), 2 on an invalid parameter, parameters file
+        or ROS argument (one line on stderr).
 
     """
-    rclpy.init(args=args)
     try:
+        check_params_files(sys.argv if args is None else args)
+        init_rclpy(args)
         node = PlaneNode()
     except ConfigError as err:
         print(f'plane_node: {err}', file=sys.stderr)
