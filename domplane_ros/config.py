@@ -167,6 +167,7 @@ class HeadConfig(_Section):
 
     joint_states_topic: str = ''
     max_age_s: float = 0.5
+    max_joint_velocity: float = 20.0
 
 
 @dataclass(frozen=True)

@@ -213,6 +213,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'pipeline.fast_joint_velocity).'),
     ParamSpec('head.max_age_s', 0.5, 'float',
               'Joint states older than this (receive time) are ignored, seconds.', 0.0, 60.0),
+    ParamSpec('head.max_joint_velocity', 20.0, 'float',
+              'Joint states whose largest absolute velocity exceeds this (rad/s) are '
+              'implausible: flagged in the log and /diagnostics and not used as a hint.',
+              0.01, 1e4),
     # Synchroniser and transport.
     ParamSpec('sync.slop_s', 0.01, 'float',
               'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
