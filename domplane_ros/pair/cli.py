@@ -296,7 +296,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         _error('interrupted')
         return EXIT_INTERRUPTED
-    return _report(outcomes)
+    try:
+        return _report(outcomes)
+    except BrokenPipeError:   # the reader went away (| head): stop quietly
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return EXIT_FAILED
 
 
 def _report(outcomes: list[PairOutcome]) -> int:
