@@ -161,10 +161,17 @@ def _write_png(path: Path, image: np.ndarray) -> None:
     try:
         with os.fdopen(fd, 'wb') as stream:
             stream.write(data.tobytes())
+        os.chmod(tmp, 0o666 & ~_umask())   # as open() would make it, not mkstemp's 0600
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
 
 
 def _summary(result: FrameResult) -> str:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 import re
 import shutil
@@ -31,6 +32,12 @@ def reference():
     return ref, road
 
 
+def _umask() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 def printed_homographies(text: str) -> dict[str, np.ndarray]:
     """Return the homographies plane_pair printed, by pair name."""
     return {m.group(1): np.array([[float(v) for v in m.group(k).split(',')] for k in (2, 3, 4)])
@@ -52,6 +59,8 @@ def test_kitti_pair_gives_the_ground_truth_road_plane(tmp_path, capsys, referenc
     scores = mask_scores(mask, ref.road, ref.off_road, ref.road | ref.off_road)
     # Measured: road IoU 0.79 and off-road recall 0.79 (test_evaluate.py's figures).
     assert scores['plane_iou'] > 0.7 and scores['obstacle_recall'] > 0.7
+    # Readable like any file the user makes (not a temporary file's 0600).
+    assert (tmp_path / 'out' / 'left_mask.png').stat().st_mode & 0o044 == 0o044 & ~_umask()
     overlay = cv2.imread(str(tmp_path / 'out' / 'left_overlay.png'))
     assert overlay.shape[1] == mask.shape[1] and overlay.shape[0] > mask.shape[0] + 40
 
