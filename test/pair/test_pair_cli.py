@@ -150,3 +150,13 @@ def test_existing_pictures_are_not_overwritten_without_force(tmp_path, capsys):
     assert rc == cli.EXIT_REFUSED and 'use --force' in err
     assert (tmp_path / 'left_mask.png').read_bytes() == b'keep me'
     assert not (tmp_path / 'left_overlay.png').exists()
+
+
+def test_help_names_every_option_and_the_exit_codes(capsys):
+    assert cli.main(['--help']) == 0
+    text = capsys.readouterr().out
+    for option in ('--params-file', '--focal-px', '--baseline-over-height', '--tilt-deg',
+                   '--vergence-deg', '--roi', '--out', '--force', '--fps'):
+        assert option in text
+    assert 'f = (W/2)/tan(HFOV/2)' in text and 'Exit codes' in text
+    assert cli.main(['only-one.png']) == cli.EXIT_REFUSED
