@@ -191,7 +191,7 @@ def format_outcome(outcome: PairOutcome) -> list[str]:
     lines = [f'{outcome.pair.name}: {_summary(result)} '
              f'({result.timings_ms.get("total", 0.0):.0f} ms)']
     if result.homography is not None:
-        rows = [', '.join(f'{v: .8g}' for v in row) for row in result.homography]
+        rows = [', '.join(f'{v:14.8g}' for v in row) for row in result.homography]
         lines.append(f'  H = [[{rows[0]}],')
         lines.append(f'       [{rows[1]}],')
         lines.append(f'       [{rows[2]}]]')
