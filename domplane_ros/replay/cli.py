@@ -10,7 +10,7 @@ same resets), and writes a new bag with the node's outputs::
     plane_replay INPUT_BAG OUTPUT_BAG [--params-file config/plane_node.yaml]
                  [--left-topic /left/image_raw] [--right-topic /right/image_raw]
                  [--storage sqlite3|mcap] [--force] [--csv FILE] [--no-progress]
-                 [--strict] [--keep-partial]
+                 [--strict] [--keep-partial] [--debug-images]
 
 Output topics, each written with the bag timestamp of the left image's header stamp:
 
@@ -21,6 +21,10 @@ Output topics, each written with the bag timestamp of the left image's header st
   processed pair; all 0 when no plane was found.
 * ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``): the node's keys, once per
   ``diagnostics.period_s`` of bag time (1 s by default) and once at the end.
+* ``/plane/debug_image`` (``sensor_msgs/msg/Image``, rgb8, the left image's header), only with
+  ``--debug-images``: the node's ``plane/debug_image`` for every processed pair (mask tint,
+  corners matched on the plane in cyan, unmatched ones in magenta), to review a recording frame
+  by frame in Foxglove or rqt_image_view.
 
 Exit codes: 0 on success; 3 when the output is complete except for messages the bag could
 not give (undecodable payloads: skipped, counted, named on stderr and recorded in the output's
@@ -98,7 +102,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                force: bool = False, csv_path: str | os.PathLike[str] | None = None,
                progress: bool = False,
                on_frame: Callable[[ReplayedFrame], None] | None = None,
-               strict: bool = False, keep_partial: bool = False) -> ReplaySummary:
+               strict: bool = False, keep_partial: bool = False,
+               debug_images: bool = False) -> ReplaySummary:
     """Replay a bag through the pipeline and write the node's outputs to a new bag.
 
     Everything that can be checked up front is checked before anything is written.
@@ -119,6 +124,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
         keep_partial: On a read failure part-way, keep the output up to it as
             ``OUTPUT_BAG.incomplete`` (and ``CSV.incomplete``), marked
             ``plane_replay.complete: 'false'`` in its metadata, instead of removing it.
+        debug_images: Also write ``/plane/debug_image`` (the node's debug overlay, rgb8).
 
     Returns:
         The summary.
@@ -137,7 +143,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     t_start = time.perf_counter()
     with BagInput(paths.input_bag, left_topic, right_topic) as bag:
         run = _Run(bag, paths, config if config is not None else PlaneNodeConfig(),
-                   (left_topic, right_topic), storage or bag.storage, force, progress)
+                   (left_topic, right_topic), storage or bag.storage, force, progress,
+                   debug_images)
         try:
             run.execute(on_frame, strict, keep_partial)
         except NoPairsError as err:
@@ -183,13 +190,15 @@ class _Run:
     """One replay's open outputs and its session, from the first message to the summary."""
 
     def __init__(self, bag: BagInput, paths: _RunPaths, config: PlaneNodeConfig,
-                 topics: tuple[str, str], storage: str, force: bool, progress: bool) -> None:
+                 topics: tuple[str, str], storage: str, force: bool, progress: bool,
+                 debug_images: bool = False) -> None:
         self.bag = bag
         self.paths = paths
         self.summary = ReplaySummary(str(paths.input_bag), str(paths.output_bag), storage)
         self.session = ReplaySession(config, topics)
         self.clock = DiagnosticsClock(config.transport.diagnostics_period_s)
-        self.output = BagOutput(paths.output_bag, storage, replace=force)
+        self.output = BagOutput(paths.output_bag, storage, replace=force,
+                                debug_images=debug_images)
         self.table = CsvOutput(paths.csv) if paths.csv is not None else None
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
@@ -415,6 +424,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--strict', action='store_true',
                         help='fail (exit 1, output removed) on the first message that cannot '
                              'be deserialised, instead of skipping it (exit 3)')
+    parser.add_argument('--debug-images', action='store_true',
+                        help='also write /plane/debug_image (rgb8: mask tint, matched and '
+                             'unmatched corners) for every pair, to review in Foxglove')
     bar = parser.add_mutually_exclusive_group()
     bar.add_argument('--no-progress', dest='progress', action='store_false', default=None,
                      help='no progress bar (the default when stderr is not a terminal)')
@@ -460,7 +472,8 @@ def main(argv: list[str] | None = None) -> int:
                              left_topic=args.left_topic, right_topic=args.right_topic,
                              storage=args.storage, force=args.force, csv_path=args.csv,
                              progress=progress, strict=args.strict,
-                             keep_partial=args.keep_partial)
+                             keep_partial=args.keep_partial,
+                             debug_images=args.debug_images)
     except Terminated:
         _error('terminated (SIGTERM); the partial output was removed')
         return EXIT_TERMINATED

@@ -18,9 +18,10 @@ import sqlite3
 import tempfile
 from typing import Any, Iterator
 
-from domplane_ros.core.image import gray_to_image_fields
+from domplane_ros.core.image import gray_to_image_fields, rgb_to_image_fields
 from domplane_ros.errors import BagError, clip_text
 from domplane_ros.replay.reader import BagReadError, IMAGE_TYPE, ReplayedFrame, typestore
+from domplane_ros.stream.frame import debug_overlay
 from domplane_ros.stream.status import STATUS_NAME
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -30,6 +31,7 @@ DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 
 HOMOGRAPHY_TOPIC = '/plane/homography'
 MASK_TOPIC = '/plane/mask'
+DEBUG_IMAGE_TOPIC = '/plane/debug_image'
 DIAGNOSTICS_TOPIC = '/diagnostics'
 
 STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
@@ -64,11 +66,14 @@ class BagOutput:
         path: Where the finished bag goes.
         storage: ``'sqlite3'`` or ``'mcap'``.
         replace: Replace an existing ``path`` at commit.
+        debug_images: Also write ``/plane/debug_image`` (rgb8, the node's debug overlay) for
+            every processed pair.
 
     """
 
-    def __init__(self, path: str | os.PathLike[str], storage: str, replace: bool) -> None:
-        """Create the temporary bag and its three connections."""
+    def __init__(self, path: str | os.PathLike[str], storage: str, replace: bool,
+                 debug_images: bool = False) -> None:
+        """Create the temporary bag and its connections."""
         self.path = Path(path)
         self.replace = replace
         self.typestore = ts = typestore()
@@ -87,6 +92,11 @@ class BagOutput:
             self._conn_mask = self._writer.add_connection(MASK_TOPIC, IMAGE_TYPE, typestore=ts)
             self._conn_diag = self._writer.add_connection(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE,
                                                           typestore=ts)
+            self._conn_debug = None
+            if debug_images:
+                self._conn_debug = self._writer.add_connection(DEBUG_IMAGE_TOPIC, IMAGE_TYPE,
+                                                               typestore=ts)
+                self.counts[DEBUG_IMAGE_TOPIC] = 0
         except BaseException:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             raise
@@ -117,9 +127,10 @@ class BagOutput:
         self.counts[topic] += 1
 
     def write_frame(self, frame: ReplayedFrame) -> None:
-        """Write a processed pair: its homography (if a plane was found) and its mask.
+        """Write a processed pair: its homography (if a plane was found), mask, debug image.
 
-        Both are written at the left image's header stamp; the mask carries the left header.
+        All are written at the left image's header stamp; the mask and the debug image (only
+        with ``debug_images``) carry the left header.
         """
         header = frame.pair.left.header
         stamp = frame.pair.left_stamp_ns
@@ -136,6 +147,16 @@ class BagOutput:
             is_bigendian=fields['is_bigendian'], step=fields['step'],
             data=np.frombuffer(fields['data'], np.uint8))
         self._write(self._conn_mask, MASK_TOPIC, stamp, mask)
+        if self._conn_debug is not None:
+            self._write_debug_image(frame, mask.header)
+
+    def _write_debug_image(self, frame: ReplayedFrame, header: Any) -> None:
+        """Write the node's debug overlay of a pair (rgb8) with the given header."""
+        fields = rgb_to_image_fields(debug_overlay(frame.left, frame.result), 'rgb8')
+        image = self._Image(header=header, height=fields['height'], width=fields['width'],
+                            encoding=fields['encoding'], is_bigendian=fields['is_bigendian'],
+                            step=fields['step'], data=np.frombuffer(fields['data'], np.uint8))
+        self._write(self._conn_debug, DEBUG_IMAGE_TOPIC, frame.pair.left_stamp_ns, image)
 
     def homography_msg(self, homography: np.ndarray) -> Any:
         """Return the node's Float64MultiArray for a (3, 3) homography (rosbags message)."""
