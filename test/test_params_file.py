@@ -23,9 +23,12 @@ SHIPPED = ROOT / 'config' / 'plane_node.yaml'
 
 
 def alias_bomb(levels: int = 26) -> str:
-    """Return the probe's file: ``levels`` anchors, each used twice by the next (850 bytes)."""
-    lines = ['plane_node:', '  ros__parameters:', '    a0: &a0 [1.0, 2.0]']
-    lines += [f'    a{i}: &a{i} [*a{i - 1}, *a{i - 1}]' for i in range(1, levels)]
+    """Return the probe's file: ``levels`` anchors, each used twice by the next (855 bytes).
+
+    Mappings, so that flattening the parameter names walks 2**25 paths (the old reader).
+    """
+    lines = ['plane_node:', '  ros__parameters:', '    a0: &a0 {x: 1.0}']
+    lines += [f'    a{i}: &a{i} {{x: *a{i - 1}, y: *a{i - 1}}}' for i in range(1, levels)]
     return '\n'.join(lines) + '\n'
 
 
