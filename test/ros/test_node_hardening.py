@@ -159,10 +159,12 @@ def test_initial_homography_is_checked_at_start_up_and_at_runtime(ros_context):
         node.destroy_node()
 
 
-def test_shutdown_with_a_pair_in_flight_logs_no_error(tmp_path, ros_context, ros_domain_id):
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM])
+def test_shutdown_with_a_pair_in_flight_logs_no_error(tmp_path, ros_context, ros_domain_id,
+                                                      sig):
     NAME = 'plane_node_shutdown_test'   # noqa: N806 - its diagnostics tell it from others
     # A search of 20 candidates on every noise pair (about 1 s; nothing verifies): the worker
-    # is busy when SIGINT comes, and done within the 5 s that the shutdown waits for it.
+    # is busy when the signal comes, and done within the 5 s that the shutdown waits for it.
     proc = subprocess.Popen(
         [str(BIN / 'plane_node'), '--ros-args', '-r', f'__node:={NAME}',
          '-p', 'prior.refine_best:=20',
@@ -191,7 +193,7 @@ def test_shutdown_with_a_pair_in_flight_logs_no_error(tmp_path, ros_context, ros
         for pub, offset in zip(pubs, (0, 1000)):   # one more pair, to be taken mid-search
             pub.publish(_image(noise, stamp + offset, 'cam'))
         time.sleep(0.3)
-        proc.send_signal(signal.SIGINT)
+        proc.send_signal(sig)
         out, err = proc.communicate(timeout=60)
     finally:
         if proc.poll() is None:
