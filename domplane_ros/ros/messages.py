@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 from typing import Any, Iterable
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from domplane_ros.config import ParamSpec
 from domplane_ros.core.image import gray_to_image_fields, rgb_to_image_fields
+from domplane_ros.stream.status import result_status, RESULT_STATUS_NAME
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType
@@ -26,9 +26,6 @@ _TYPES = {
 # Parameters that only take effect when the node starts.
 READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s',
                        'head.joint_states_topic', 'image_transport', 'camera_info.topic'})
-
-RESULT_STATUS_NAME = 'plane'
-"""``DiagnosticStatus.name`` of the ``plane/result`` message."""
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -72,41 +69,25 @@ def homography_msg(matrix: np.ndarray) -> Float64MultiArray:
     return msg
 
 
-def result_msg(header: Header, hardware_id: str, state: str, confidence: float,
-               homography: np.ndarray | None, reason: str) -> DiagnosticArray:
+def result_msg(header: Header, hardware_id: str, frame: Any) -> DiagnosticArray:
     """Build the stamped per-pair result: a DiagnosticArray with one status named ``plane``.
 
     The array's header is the left image's (stamp and frame id), so the result matches the
-    mask of the same pair. The status's level is OK with a plane, WARN without; its message
-    is the lock state (and the reason when there is no plane). Its values, all strings:
-    ``state`` (locked, tracking, searching), ``plane`` (true or false), ``confidence`` (0 to
-    1, 0 without a plane), ``homography`` (a JSON list of the 9 row-major values of H, left
-    pixel to right pixel with ``H[2][2] = 1``; ``[]`` without a plane) and ``reason``.
+    mask of the same pair; the status is :func:`~domplane_ros.stream.status.result_status`.
 
     Args:
         header: The left image's header.
         hardware_id: The node's fully qualified name.
-        state: The lock state after the pair.
-        confidence: The published plane's confidence in [0, 1].
-        homography: (3, 3) float64 finite homography, or None when no plane is published.
-        reason: Why there is no plane ('' with one).
+        frame: The processed pair (a ``ProcessedPair``).
 
     Returns:
         The message.
 
     """
-    plane = homography is not None
-    values = [float(v) for v in np.asarray(homography, dtype=np.float64).ravel()] if plane \
-        else []
-    status = DiagnosticStatus(
-        level=DiagnosticStatus.OK if plane else DiagnosticStatus.WARN,
-        name=RESULT_STATUS_NAME, hardware_id=hardware_id,
-        message=state if plane else f'{state}: {reason or "no plane"}')
-    status.values = [KeyValue(key='state', value=state),
-                     KeyValue(key='plane', value='true' if plane else 'false'),
-                     KeyValue(key='confidence', value=repr(float(confidence) if plane else 0.0)),
-                     KeyValue(key='homography', value=json.dumps(values)),
-                     KeyValue(key='reason', value=reason)]
+    level, message, values = result_status(frame)
+    status = DiagnosticStatus(level=bytes([level]), name=RESULT_STATUS_NAME,
+                              hardware_id=hardware_id, message=message)
+    status.values = [KeyValue(key=k, value=v) for k, v in values]
     array = DiagnosticArray()
     array.header = header
     array.status = [status]

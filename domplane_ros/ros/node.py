@@ -315,9 +315,7 @@ class PlaneNode(Node):
         else:
             self._warn_input(f'no plane: {result.reason}',
                              key='no plane ' + problem_key(result.reason))
-        self._pub_result.publish(result_msg(
-            header, self.get_fully_qualified_name(), result.state, result.confidence,
-            homography, result.reason or ('' if homography is not None else 'not finite')))
+        self._pub_result.publish(result_msg(header, self.get_fully_qualified_name(), frame))
         self._pub_mask.publish(image_msg(result.mask, header, 'mono8'))
         if self._pub_debug.get_subscription_count() > 0:
             rgb = debug_overlay(frame.left, result)
