@@ -309,9 +309,8 @@ class PlaneNode(Node):
         for warning in result.warnings:
             self._warn_input(warning)
         header = frame.pair.left.header
-        homography = result.homography if frame.publishable else None
-        if homography is not None:
-            self._pub_h.publish(homography_msg(homography))
+        if frame.publishable:
+            self._pub_h.publish(homography_msg(result.homography))
         else:
             self._warn_input(f'no plane: {result.reason}',
                              key='no plane ' + problem_key(result.reason))
