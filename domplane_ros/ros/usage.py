@@ -74,8 +74,11 @@ def usage(width: int = 99) -> str:
     """
     lines = [_USAGE]
     for spec in PARAMETERS:
-        bounds = _range(spec)
-        lines.append(f'  {spec.name} = {spec.default!r}' + (f'  [{bounds}]' if bounds else ''))
+        head, bounds = f'  {spec.name} = {spec.default!r}', _range(spec)
+        if bounds and len(head) + len(bounds) + 4 <= width:
+            lines.append(f'{head}  [{bounds}]')
+        else:
+            lines.extend([head, f'      [{bounds}]'] if bounds else [head])
         lines.extend(textwrap.wrap(spec.description, width=width, initial_indent=' ' * 6,
-                                   subsequent_indent=' ' * 6))
+                                   subsequent_indent=' ' * 6, break_on_hyphens=False))
     return '\n'.join(lines)
