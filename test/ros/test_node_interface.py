@@ -167,10 +167,16 @@ def test_compressed_pairs_give_the_plane_and_a_result_stamped_like_the_mask(
         assert [s.topic_name for s in node._subs] == ['/left/image_raw/compressed',
                                                       '/right/image_raw/compressed']
         driver.wait_for_discovery()
+        # A payload that is not an image: one decode error, no output for it, the node goes on.
+        garbage = compressed_msg(scene.left, fmt, 1_000_000_000, 'left_cam')
+        garbage.data = bytes(range(256)) * 4
+        driver.send_pair(garbage, compressed_msg(scene.right, fmt, 1_000_001_000, 'right_cam'))
+        driver.spin_until(lambda: node.session.counters.decode_errors == 1, 5.0)
+        assert fmt in node.session.last_error and not driver.results and not driver.masks
         stamps = send_black_then_scene(
             driver, scene, lambda gray, stamp, frame: compressed_msg(gray, fmt, stamp, frame))
         results, masks = check_results_match_masks(driver, stamps, node)
-        assert node.session.counters.decode_errors == 0
+        assert node.session.counters.decode_errors == 1
 
         first = [results[divmod(s, 1_000_000_000)] for s in stamps[:2]]
         for msg in first:  # the black pairs: refused, no plane, an all-unknown mask
