@@ -1,8 +1,9 @@
 """plane_node as a ROS 2 user runs it, over real DDS (loopback).
 
-Compressed input (real PNG and JPEG payloads of a rendered stereo pair with truth), the
-stamped result on every pair (``plane/result`` carries the mask's stamp, searching and failed
-pairs included), a ``/**`` params file under another node name, and ``camera_info``.
+Compressed input (PNG and JPEG payloads of a rendered stereo pair with truth, and KITTI
+000046's PNG files as they are), the stamped result on every pair (``plane/result`` carries
+the mask's stamp, searching and failed pairs included), a ``/**`` params file under another
+node name, and ``camera_info`` (KITTI's calibration for the real pair).
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from domplane_ros.config import PARAMETERS
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.ros.node import PlaneNode
 from domplane_ros.sim.generators import random_scene
+from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.tools.evaluation.references import kitti_reference
 import numpy as np
 import pytest
 from rclpy.executors import SingleThreadedExecutor
@@ -283,3 +286,65 @@ def test_camera_info_narrows_the_focal_prior_and_sets_the_principal_point(ros_co
         assert truth_error_px(scene, h) < 1.0
     finally:
         driver.close(node)
+
+
+KITTI = ROOT / 'test' / 'data' / 'kitti2015_000046'
+# KITTI raw 2011_09_26 (the 1242x375 frames) rectified camera 2: f and principal point, px.
+KITTI_F, KITTI_CX, KITTI_CY = 721.5377, 609.5593, 172.854
+KITTI_TARGET_PX = 1.5  # the evaluation's KITTI target
+
+
+def test_kitti_png_files_and_camera_info_give_the_road_live_as_offline(ros_context):
+    # The rig's documented set-up (b/h, tilt, vergence) and the road's part of the image; the
+    # focal length and principal point come from camera_info, nothing from the disparity.
+    overrides = [Parameter('image_transport', value='compressed'),
+                 Parameter('camera_info.topic', value='left/camera_info'),
+                 Parameter('prior.baseline_over_height', value=[0.25, 0.40]),
+                 Parameter('prior.tilt_deg', value=[-5.0, 5.0]),
+                 Parameter('prior.vergence_deg', value=[-1.0, 1.0]),
+                 Parameter('features.roi', value=[0.0, 0.55, 1.0, 1.0])]
+    node = PlaneNode(context=ros_context, parameter_overrides=overrides)
+    driver = Driver(ros_context, [node], 'left/image_raw/compressed',
+                    'right/image_raw/compressed')
+    info_pub = driver.node.create_publisher(CameraInfo, 'left/camera_info',
+                                            qos_profile_sensor_data)
+    files = {side: (KITTI / f'{side}.png').read_bytes() for side in ('left', 'right')}
+
+    def png_file(side, stamp_ns):
+        msg = fill_header(CompressedImage(), stamp_ns, f'{side}_cam')
+        msg.format = 'rgb8; png compressed bgr8'
+        msg.data = files[side]
+        return msg
+
+    try:
+        driver.wait_for_discovery()
+        info = _camera_info(KITTI_F, KITTI_CX, KITTI_CY, 1242, 375, 1)
+        info_pub.publish(info)
+        driver.spin_until(lambda: node.config.prior.principal_point_px != (), 10.0)
+        stamp = 30_000_000_000
+        while not driver.results:
+            driver.send_pair(png_file('left', stamp), png_file('right', stamp), wait_s=1.0)
+            stamp += 100_000_000
+            assert stamp < 30_000_000_000 + 20 * 100_000_000, 'no result from the node'
+        result = driver.results[0]
+        values = result_values(result)
+        assert values['plane'] == 'true', values['reason']
+        h = np.array(json.loads(values['homography'])).reshape(3, 3)
+        driver.spin_until(lambda: any(stamp_key(m.header) == stamp_key(result.header)
+                                      for m in driver.masks), 5.0)
+        config = node.config
+    finally:
+        driver.close(node)
+    # Road pixels of the ground-truth disparity: x_right = x_left - d.
+    disparity = cv2.imread(str(KITTI / 'disp_occ_left.png'), cv2.IMREAD_UNCHANGED) / 256.0
+    road = kitti_reference(KITTI).road
+    ys, xs = np.nonzero(road)
+    src = np.stack([xs, ys], axis=1).astype(float)
+    dst = np.stack([xs - disparity[ys, xs], ys], axis=1)
+    error = float(np.linalg.norm(apply_homography(h, src) - dst, axis=1).mean())
+    assert error < KITTI_TARGET_PX, error
+    # Live equals offline: the same decoder and the same first-pair pipeline on the files.
+    offline = PlanePipeline(config).process(
+        cv2.imread(str(KITTI / 'left.png'), cv2.IMREAD_GRAYSCALE),
+        cv2.imread(str(KITTI / 'right.png'), cv2.IMREAD_GRAYSCALE), 30_000_000_000)
+    assert offline.ok and np.allclose(offline.homography, h, rtol=0, atol=1e-9)
