@@ -170,6 +170,7 @@ class HeadConfig(_Section):
 
     joint_states_topic: str = ''
     max_age_s: float = 0.5
+    max_joint_velocity: float = 20.0
 
 
 @dataclass(frozen=True)
@@ -323,36 +324,25 @@ def one_shot_search(config: PlaneNodeConfig) -> PlaneNodeConfig:
 
 
 def load_params_file(path: str, node_name: str = 'plane_node') -> PlaneNodeConfig:
-    """Read a ROS 2 parameters YAML file and validate the node's block.
+    """Read a ROS 2 parameters YAML file through the guarded reader and validate it.
 
-    Accepts ``plane_node: ros__parameters:``, ``/plane_node: ...`` and ``/**: ...`` blocks.
+    Accepts ``plane_node: ros__parameters:``, ``/plane_node: ...`` and ``/**: ...`` blocks
+    (merged, wildcards first); see :mod:`domplane_ros.params_file` for every check (size,
+    aliases, structure) made before the file is used.
 
     Args:
         path: Path to the YAML file.
-        node_name: The node whose block is read.
+        node_name: The node whose blocks are read.
 
     Returns:
         The validated configuration.
 
     Raises:
-        ConfigError: If the file cannot be read or parsed, has no block for the node, or
-            holds an invalid parameter.
+        ConfigError: If the file cannot be read or parsed, is too large, uses an alias, is
+            not shaped as a parameters file, has no block for the node, or holds an invalid
+            parameter; the message is one line and names the problem.
 
     """
-    import yaml
+    from domplane_ros.params_file import read_node_params
 
-    try:
-        with open(path, encoding='utf-8') as stream:
-            document = yaml.safe_load(stream)
-    except OSError as err:
-        raise ConfigError(f'cannot read params file {path!r}: {err.strerror}') from err
-    except yaml.YAMLError as err:
-        raise ConfigError(f'params file {path!r} is not valid YAML: {err}') from err
-    if not isinstance(document, Mapping):
-        raise ConfigError(f'params file {path!r} holds no parameter blocks')
-    for key in (node_name, '/' + node_name, '/**'):
-        block = document.get(key)
-        if isinstance(block, Mapping) and 'ros__parameters' in block:
-            return PlaneNodeConfig.from_ros_params(block['ros__parameters'] or {})
-    raise ConfigError(
-        f'params file {path!r} has no "{node_name}: ros__parameters:" block')
+    return PlaneNodeConfig.from_ros_params(read_node_params(path, node_name))

@@ -118,8 +118,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('prior.screen_threshold_px', 12.0, 'float',
               'Truncation of the cheap closest-point screening energy, in pixels.', 0.5, 500.0),
     ParamSpec('initial_homography', [], 'floats',
-              'Optional initial homography, 9 values row-major, left pixel to right pixel; '
-              'empty means search the prior.', lengths=(0, 9)),
+              'Optional initial homography, 9 values row-major, left pixel to right pixel '
+              '(finite, invertible: condition number at most 1e6 with pixels scaled by '
+              '1/1000); empty means search the prior.', lengths=(0, 9)),
     # Verification (every plane is verified before it is published).
     ParamSpec('verification.min_score', 0.25, 'float',
               'Least verification score (share of the textured image that the plane, and not '
@@ -218,6 +219,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'pipeline.fast_joint_velocity).'),
     ParamSpec('head.max_age_s', 0.5, 'float',
               'Joint states older than this (receive time) are ignored, seconds.', 0.0, 60.0),
+    ParamSpec('head.max_joint_velocity', 20.0, 'float',
+              'Joint states whose largest absolute velocity exceeds this (rad/s) are '
+              'implausible: flagged in the log and /diagnostics and not used as a hint.',
+              0.01, 1e4),
     # Synchroniser and transport.
     ParamSpec('sync.slop_s', 0.01, 'float',
               'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
@@ -254,6 +259,16 @@ def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
+def _is_finite_number(value: Any) -> bool:
+    """Return whether ``value`` is a number that a float holds finitely (huge ints are not)."""
+    if not _is_number(value):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
+
+
 def check_value(spec: ParamSpec, value: Any) -> Any:
     """Validate one parameter value against its spec and return it normalised.
 
@@ -272,35 +287,37 @@ def check_value(spec: ParamSpec, value: Any) -> Any:
     name = spec.name
     if spec.kind == 'bool':
         if not isinstance(value, bool):
-            raise ConfigError(f'parameter {name!r}: expected a bool, got {value!r}')
+            raise ConfigError(f'parameter {name!r}: expected a bool, got {_shown(value)}')
         return value
     if spec.kind == 'str':
         if not isinstance(value, str):
-            raise ConfigError(f'parameter {name!r}: expected a string, got {value!r}')
+            raise ConfigError(f'parameter {name!r}: expected a string, got {_shown(value)}')
         if spec.choices is not None and value not in spec.choices:
             raise ConfigError(
-                f'parameter {name!r}: {value!r} is not one of {", ".join(spec.choices)}')
+                f'parameter {name!r}: {_shown(value)} is not one of {", ".join(spec.choices)}')
         return value
     if spec.kind == 'int':
         if not isinstance(value, int) or isinstance(value, bool):
-            raise ConfigError(f'parameter {name!r}: expected an integer, got {value!r}')
+            raise ConfigError(f'parameter {name!r}: expected an integer, got {_shown(value)}')
         _check_bounds(spec, value)
         return int(value)
     if spec.kind == 'float':
-        if not _is_number(value) or not math.isfinite(value):
-            raise ConfigError(f'parameter {name!r}: expected a finite number, got {value!r}')
+        if not _is_finite_number(value):
+            raise ConfigError(
+                f'parameter {name!r}: expected a finite number, got {_shown(value)}')
         _check_bounds(spec, float(value))
         return float(value)
     # Lists: 'range' and 'floats'.
     if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
-        raise ConfigError(f'parameter {name!r}: expected a list of numbers, got {value!r}')
+        raise ConfigError(f'parameter {name!r}: expected a list of numbers, got {_shown(value)}')
     items = list(value)
-    if not all(_is_number(v) and math.isfinite(v) for v in items):
-        raise ConfigError(f'parameter {name!r}: expected finite numbers, got {items!r}')
+    if not all(_is_finite_number(v) for v in items):
+        raise ConfigError(
+            f'parameter {name!r}: expected finite numbers, got {_shown(items)}')
     items = [float(v) for v in items]
     if spec.kind == 'range':
         if len(items) != 2:
-            raise ConfigError(f'parameter {name!r}: expected [min, max], got {items!r}')
+            raise ConfigError(f'parameter {name!r}: expected [min, max], got {_shown(items)}')
         if items[0] > items[1]:
             raise ConfigError(
                 f'parameter {name!r}: inverted range [min, max] = {items!r} (min > max)')
@@ -313,16 +330,68 @@ def check_value(spec: ParamSpec, value: Any) -> Any:
             f'parameter {name!r}: expected {allowed} values, got {len(items)}')
     for v in items:
         _check_bounds(spec, v)
+    extra = _EXTRA_CHECKS.get(name)
+    if extra is not None and items:
+        extra(spec, items)
     return items
+
+
+def check_homography_values(spec: ParamSpec, values: list[float]) -> None:
+    """Refuse a homography that cannot be a warm start: singular or ill-conditioned.
+
+    The condition number is measured with pixel coordinates scaled by 1/1000 (so that a
+    translation of hundreds of pixels or a perspective term of 1e-3 weigh about 1, as in
+    Hartley normalisation of a 1000-pixel image), after scaling the matrix to unit largest
+    entry, so that values as large as 1e308 do not overflow.
+
+    Args:
+        spec: The parameter (for messages).
+        values: 9 finite floats, row-major.
+
+    Raises:
+        ConfigError: If the matrix is all zeros, singular or its condition number exceeds
+            :data:`MAX_HOMOGRAPHY_CONDITION`.
+
+    """
+    import numpy as np
+
+    matrix = np.asarray(values, dtype=np.float64).reshape(3, 3)
+    scale = float(np.max(np.abs(matrix)))
+    if scale == 0.0:
+        raise ConfigError(f'parameter {spec.name!r}: all zeros is not a homography')
+    scaled = matrix / scale
+    conditioning = np.diag([1e-3, 1e-3, 1.0])
+    normalised = conditioning @ scaled @ np.linalg.inv(conditioning)
+    singular = np.linalg.svd(normalised, compute_uv=False)
+    if not np.all(np.isfinite(singular)) or singular[2] <= 0.0:
+        raise ConfigError(f'parameter {spec.name!r}: singular matrix (rank '
+                          f'{int(np.linalg.matrix_rank(normalised))}), not invertible')
+    condition = float(singular[0] / singular[2])
+    if condition > MAX_HOMOGRAPHY_CONDITION:
+        raise ConfigError(
+            f'parameter {spec.name!r}: singular or nearly so (condition number '
+            f'{condition:.3g} > {MAX_HOMOGRAPHY_CONDITION:.0e}, pixels scaled by 1/1000)')
+
+
+MAX_HOMOGRAPHY_CONDITION = 1e6
+"""Largest condition number of ``initial_homography`` (pixels scaled by 1/1000) accepted."""
+
+_EXTRA_CHECKS = {'initial_homography': check_homography_values}
+
+
+def _shown(value: Any, limit: int = 80) -> str:
+    """Return ``repr(value)`` for a message, clipped to ``limit`` characters with its length."""
+    text = repr(value)
+    return text if len(text) <= limit else f'{text[:limit]}... ({len(text)} characters)'
 
 
 def _check_bounds(spec: ParamSpec, value: float) -> None:
     if spec.low is not None and value < spec.low:
         raise ConfigError(
-            f'parameter {spec.name!r}: {value!r} is below the minimum {spec.low!r}')
+            f'parameter {spec.name!r}: {_shown(value)} is below the minimum {spec.low!r}')
     if spec.high is not None and value > spec.high:
         raise ConfigError(
-            f'parameter {spec.name!r}: {value!r} is above the maximum {spec.high!r}')
+            f'parameter {spec.name!r}: {_shown(value)} is above the maximum {spec.high!r}')
 
 
 def flatten_params(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:

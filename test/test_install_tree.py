@@ -22,7 +22,7 @@ PACKAGE = 'domplane_ros'
 NOT_SOURCE = shutil.ignore_patterns(
     '.git', '.venv', '.hypothesis', '.pytest_cache', '__pycache__', '*.egg-info', 'build',
     'install', 'log', 'demo_output', 'bench_output', 'eval_output')
-LAUNCHERS = ('plane_node', 'plane_replay')
+LAUNCHERS = ('plane_node', 'plane_replay', 'plane_pair')
 
 
 @pytest.fixture(scope='module')

@@ -31,13 +31,13 @@ READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s',
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     """Build the ROS ParameterDescriptor of a spec: description, type, range."""
     # Dynamic typing lets the node's own validator (config.check_value) judge every value, so
-    # a refused value gets a reason that names the parameter, and an integer is accepted for
-    # a float as the replay's YAML reader accepts it. A parameter whose default is an empty
-    # list has no value type to infer, so it keeps its declared type.
+    # a refused value gets a reason that names the parameter, and an integer (or a list of
+    # integers, as for initial_homography) is accepted for a float as the replay's YAML
+    # reader accepts it. A parameter whose default is an empty list is declared unset
+    # (the node reads that as its default).
     desc = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                                description=spec.description,
-                               read_only=spec.name in READ_ONLY,
-                               dynamic_typing=not _empty_list(spec.default))
+                               read_only=spec.name in READ_ONLY, dynamic_typing=True)
     constraints = []
     if spec.kind == 'float' and spec.low is not None and spec.high is not None:
         desc.floating_point_range = [FloatingPointRange(
@@ -53,10 +53,6 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
         constraints.append('one of ' + ', '.join(spec.choices))
     desc.additional_constraints = '; '.join(constraints)
     return desc
-
-
-def _empty_list(value: Any) -> bool:
-    return isinstance(value, (list, tuple)) and not value
 
 
 def homography_msg(matrix: np.ndarray) -> Float64MultiArray:

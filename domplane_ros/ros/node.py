@@ -22,15 +22,17 @@ from typing import Any
 from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
                                  PlaneNodeConfig, unknown_parameter_message)
+from domplane_ros.errors import wire_repr
 from domplane_ros.ros.camera_info import camera_model
 from domplane_ros.ros.handover import NewestSlot
 from domplane_ros.ros.messages import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros.messages import READ_ONLY, result_msg
+from domplane_ros.ros.startup import check_params_files, init_rclpy
 from domplane_ros.ros.usage import usage, wants_help
 from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.stream.session import ProcessedPair, SIDES, StreamSession
-from domplane_ros.stream.status import STATUS_NAME
+from domplane_ros.stream.status import format_number, JOINT_SPEED_KEY, STATUS_NAME
 from domplane_ros.stream.sync import Pair
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -46,7 +48,6 @@ from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data,
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from std_msgs.msg import Float64MultiArray
 
-_EMPTY_ARRAY_KINDS = {'floats': Parameter.Type.DOUBLE_ARRAY}
 _THROTTLE_S = 5.0
 
 
@@ -75,10 +76,13 @@ class PlaneNode(Node):
         self._values = self._declare_parameters()
         config = PlaneNodeConfig.from_flat(self._values)
         self.slot: NewestSlot[Pair] = NewestSlot()
+        self._stopping = False
         self._throttle = Throttle(_THROTTLE_S)
         self._qos_warned: set[str] = set()
         self._joint_speed: tuple[float, float] | None = None  # (rad/s, monotonic receive time)
         self._camera_model: tuple[float, ...] | None = None  # the K applied to the prior
+        self._implausible_joint: tuple[float, float] | None = None
+        self.implausible_joint_states = 0
         self._make_publishers()
         self._subs = self._make_subscriptions(config)
         topics = tuple(sub.topic_name for sub in self._subs)
@@ -149,8 +153,8 @@ class PlaneNode(Node):
         values: dict[str, Any] = {}
         for spec in PARAMETERS:
             default: Any = spec.default
-            if spec.kind in _EMPTY_ARRAY_KINDS and not default:
-                default = _EMPTY_ARRAY_KINDS[spec.kind]
+            if isinstance(default, list) and not default:
+                default = None   # unset: an empty list has no type to declare
             try:
                 param = self.declare_parameter(spec.name, default, descriptor(spec))
             except (InvalidParameterTypeException, InvalidParameterValueException,
@@ -186,8 +190,11 @@ class PlaneNode(Node):
             if param.name in READ_ONLY:
                 return SetParametersResult(
                     successful=False, reason=f'{param.name!r} only takes effect at start-up')
+            value = _plain(param.value)
+            if value is None and isinstance(spec.default, list):
+                value = []   # unset again: back to the default, empty
             try:
-                trial[param.name] = check_value(spec, _plain(param.value))
+                trial[param.name] = check_value(spec, value)
             except ConfigError as err:
                 return SetParametersResult(successful=False, reason=str(err))
         try:
@@ -259,18 +266,41 @@ class PlaneNode(Node):
             f'{model.principal_px[1]:.1f}){note}')
 
     def _on_joint_state(self, msg: JointState) -> None:
-        velocities = np.asarray(msg.velocity, dtype=np.float64)
-        velocities = velocities[np.isfinite(velocities)]
-        if velocities.size == 0:
+        velocities = np.abs(np.asarray(msg.velocity, dtype=np.float64))
+        finite = np.isfinite(velocities)
+        if not finite.any():
             return  # no velocities: no hint
-        self._joint_speed = (float(np.max(np.abs(velocities))), time.monotonic())
+        fastest = int(np.argmax(np.where(finite, velocities, -1.0)))
+        speed, now = float(velocities[fastest]), time.monotonic()
+        limit = self.config.head.max_joint_velocity
+        if speed > limit:
+            # A sensor fault or a unit mix-up, not a head this fast: flagged, never a hint.
+            name = msg.name[fastest] if fastest < len(msg.name) else f'#{fastest}'
+            self._implausible_joint = (speed, now)
+            self.implausible_joint_states += 1
+            self._warn_input(f'implausible head joint speed {format_number(speed, 3)} rad/s '
+                             f'(joint {wire_repr(name)}) > head.max_joint_velocity {limit:g}: '
+                             'ignored', key='implausible joint speed')
+            return
+        self._joint_speed = (speed, now)
 
     def joint_speed(self) -> float | None:
-        """Return the head's latest largest joint speed in rad/s, or None if none is recent."""
+        """Return the head's latest largest joint speed in rad/s, or None if none is recent.
+
+        Implausible speeds (above ``head.max_joint_velocity``) are never returned.
+        """
         latest = self._joint_speed
         if latest is None or time.monotonic() - latest[1] > self.config.head.max_age_s:
             return None
         return latest[0]
+
+    def _joint_values(self, values: list[tuple[str, str]]) -> list[tuple[str, str]]:
+        """Flag a recent implausible joint speed in the status values; add its count."""
+        flagged = self._implausible_joint
+        if flagged is not None and time.monotonic() - flagged[1] <= self.config.head.max_age_s:
+            text = f'implausible: {format_number(flagged[0], 3)} (ignored)'
+            values = [(key, text if key == JOINT_SPEED_KEY else value) for key, value in values]
+        return values + [('joint states implausible', str(self.implausible_joint_states))]
 
     # --- Processing ----------------------------------------------------------------------
     def _work(self) -> None:
@@ -278,6 +308,13 @@ class PlaneNode(Node):
             try:
                 self.process_pair(pair)
             except Exception as err:  # noqa: B902 - the worker must survive any one frame
+                if self._stopping or not self.context.ok():
+                    # Shutdown (Ctrl-C, SIGTERM, destroy_node) while a pair was in flight:
+                    # its outputs can no longer be published. Not an error.
+                    self.get_logger().info(
+                        'shutting down: the pair in flight (stamp '
+                        f'{pair.left_stamp_ns / 1e9:.3f} s) was cut short, nothing published')
+                    return
                 error = self.session.note_internal_error(err)
                 self.get_logger().error(f'frame failed: {error}',
                                         throttle_duration_sec=_THROTTLE_S)
@@ -337,10 +374,11 @@ class PlaneNode(Node):
                 throttle_duration_sec=60.0)
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
-            level, message, values))
+            level, message, self._joint_values(values)))
 
     def stop_worker(self) -> None:
         """Stop the worker thread; pairs then wait in :attr:`slot` (see process_pending)."""
+        self._stopping = True
         self.slot.close()
         if self._worker.is_alive() and self._worker is not threading.current_thread():
             self._worker.join(timeout=5.0)
@@ -366,14 +404,16 @@ def main(args: list[str] | None = None) -> int:
             ``--ros-args`` prints the usage and the parameters and starts no node.
 
     Returns:
-        0 on a clean shutdown or after ``--help``, 2 on an invalid parameter.
+        0 on a clean shutdown (Ctrl-C included) or after ``--help``, 2 on an invalid
+        parameter, parameters file or ROS argument (one line on stderr).
 
     """
     if wants_help(sys.argv if args is None else args):
         print(usage())
         return 0
-    rclpy.init(args=args)
     try:
+        check_params_files(sys.argv if args is None else args)
+        init_rclpy(args)
         node = PlaneNode()
     except ConfigError as err:
         print(f'plane_node: {err}', file=sys.stderr)
