@@ -12,7 +12,7 @@ import difflib
 import math
 from typing import Any, Mapping
 
-from domplane_ros.errors import ConfigError
+from domplane_ros.errors import ConfigError, wire_repr
 
 POTENTIAL_NAMES = ('least_squares', 'truncated_quadratic', 'huber', 'geman_mcclure')
 FEATURE_KINDS = ('points', 'lines', 'both')
@@ -379,10 +379,9 @@ MAX_HOMOGRAPHY_CONDITION = 1e6
 _EXTRA_CHECKS = {'initial_homography': check_homography_values}
 
 
-def _shown(value: Any, limit: int = 80) -> str:
-    """Return ``repr(value)`` for a message, clipped to ``limit`` characters with its length."""
-    text = repr(value)
-    return text if len(text) <= limit else f'{text[:limit]}... ({len(text)} characters)'
+def _shown(value: Any) -> str:
+    """Return ``repr(value)`` for a message, clipped to 80 characters with its length."""
+    return wire_repr(value, 80)
 
 
 def _check_bounds(spec: ParamSpec, value: float) -> None:

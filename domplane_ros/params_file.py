@@ -61,7 +61,9 @@ def read_yaml(path: str | os.PathLike[str]) -> Any:
     """
     name = repr(str(path))
     try:
-        with open(path, 'rb') as stream:
+        # Non-blocking, so that a FIFO does not wait for a writer before it is refused.
+        fd = os.open(path, os.O_RDONLY | getattr(os, 'O_NONBLOCK', 0))
+        with open(fd, 'rb') as stream:
             info = os.fstat(stream.fileno())
             if not stat.S_ISREG(info.st_mode):
                 raise ConfigError(f'params file {name} is not a regular file')
@@ -166,14 +168,14 @@ def _check_values(params: Mapping[Any, Any], prefix: str, where: str) -> None:
         if not isinstance(key, str) or not key:
             raise ConfigError(f'{where}: {_short(repr(key))} is not a parameter name')
         full = prefix + key
-        if isinstance(value, Mapping):
+        if isinstance(value, Mapping) and value:
             _check_values(value, full + '.', where)
         elif isinstance(value, list):
             types = {_scalar_type(v) for v in value}
             if None in types or len(types - {float, int}) > 0 and len(types) > 1:
                 raise ConfigError(f'{where}: parameter {_short(repr(full))} must be a list of '
                                   'numbers, booleans or strings of one type')
-        elif value is None or _scalar_type(value) is None:
+        elif value is None or isinstance(value, Mapping) or _scalar_type(value) is None:
             raise ConfigError(f'{where}: parameter {_short(repr(full))} has no value or a '
                               f'value of type {_kind(value)}')
 

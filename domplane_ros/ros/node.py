@@ -382,6 +382,9 @@ class PlaneNode(Node):
         self.slot.close()
         if self._worker.is_alive() and self._worker is not threading.current_thread():
             self._worker.join(timeout=5.0)
+            if self._worker.is_alive():
+                self.get_logger().info('shutting down: the pair in flight was cut short after '
+                                       '5 s, nothing more is published')
 
     def destroy_node(self) -> None:
         """Stop the worker thread, then destroy the node."""
