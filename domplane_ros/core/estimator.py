@@ -62,8 +62,15 @@ def _options(options: EstimatorConfig | None, overrides: dict[str, Any]) -> Esti
     return replace(base, **overrides) if overrides else base
 
 
+# Non-convex potentials whose scale is graduated (GNC): from ``gnc_start_px`` down to the
+# threshold. A truncated quadratic at 3 px ignores every point of a start 20 px off (measured:
+# 0 % converged from 20 px corner displacements); graduated, 95-100 % on spread, clustered,
+# outlier-heavy and sparse point sets alike (bench --basin).
+GRADUATED = ('truncated_quadratic', 'geman_mcclure')
+
+
 def gnc_scales(options: EstimatorConfig) -> list[float]:
-    """Return the scales (pixels) of the stages: one for most potentials, several for GNC.
+    """Return the scales (pixels) of the stages: one for convex potentials, several for GNC.
 
     Args:
         options: Estimator settings.
@@ -72,7 +79,7 @@ def gnc_scales(options: EstimatorConfig) -> list[float]:
         Decreasing scales ending at ``options.threshold_px``.
 
     """
-    if options.potential != 'geman_mcclure' or options.gnc_start_px <= options.threshold_px:
+    if options.potential not in GRADUATED or options.gnc_start_px <= options.threshold_px:
         return [options.threshold_px]
     scales = []
     s = options.gnc_start_px
