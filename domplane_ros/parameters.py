@@ -78,12 +78,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Weight of a line segment relative to a point in the joint energy (features.kind '
               'both).', 0.01, 100.0),
     ParamSpec('estimator.gnc_start_px', 24.0, 'float',
-              'truncated_quadratic and geman_mcclure: initial (wide) scale of graduated '
-              'non-convexity, pixels (the threshold shrinks from it to estimator.threshold_px).',
+              'Geman-McClure only: initial (wide) scale of graduated non-convexity, pixels.',
               0.1, 500.0),
     ParamSpec('estimator.gnc_factor', 0.5, 'float',
-              'truncated_quadratic and geman_mcclure: factor by which the scale shrinks per '
-              'stage.', 0.05, 0.95),
+              'Geman-McClure only: factor by which the scale shrinks per stage.', 0.05, 0.95),
     ParamSpec('estimator.max_iterations', 60, 'int',
               'Iteration cap of one two-step run (per GNC stage).', 1, 10000),
     ParamSpec('estimator.tolerance_px', 0.05, 'float',
@@ -157,8 +155,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "last good one is rejected (the 'tracking' state, then the prior search).",
               1.0, 1e6),
     ParamSpec('pipeline.warm_gnc_start_px', 6.0, 'float',
-              'truncated_quadratic and geman_mcclure: initial GNC scale when warm-starting '
-              'from the last frame '
+              'Geman-McClure only: initial GNC scale when warm-starting from the last frame '
               '(the wide estimator.gnc_start_px is used after a re-initialisation).',
               0.1, 500.0),
     ParamSpec('pipeline.check_prior_bounds', True, 'bool',
