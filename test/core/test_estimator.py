@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
-from domplane_ros.core.estimator import (estimate_plane, FailedEstimate, gnc_scales, PlaneEstimate,
-                                        TwoStep)
+from domplane_ros.core.estimator import (estimate_plane, FailedEstimate, gnc_scales,
+                                         PlaneEstimate, TwoStep)
 from domplane_ros.core.homography import apply_homography, fit_homography
 from domplane_ros.core.potentials import POTENTIALS
 from domplane_ros.core.prior import plane_homography, prior_candidates, PriorSearch
