@@ -251,6 +251,12 @@ def test_implausible_joint_speed_is_flagged_and_ignored(ros_context, capfd):
         assert values['head joint speed [rad/s]'] == 'implausible: 1.000e+308 (ignored)'
         assert int(values['joint states implausible']) >= 1
         send([0.1, -2.0], lambda: h.node.joint_speed() == 2.0)
+        assert h.node.implausible_joint_speed() is None
+        n_status = len(h.diagnostics)
+        send([0.1, -2.0], lambda: len(h.diagnostics) > n_status)
+        assert _values(h.diagnostics)['head joint speed [rad/s]'] == '2.000'
+        assert _values(h.diagnostics)['joint states implausible'] \
+            == str(h.node.implausible_joint_states)
     finally:
         h.close()
     logged = capfd.readouterr().err
