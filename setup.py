@@ -15,6 +15,7 @@ setup(
         ('share/' + PACKAGE_NAME, ['package.xml']),
         ('share/' + PACKAGE_NAME + '/config',
          sorted(glob('config/*.yaml') + glob('config/*.xml'))),
+        ('share/' + PACKAGE_NAME + '/launch', sorted(glob('launch/*.launch.py'))),
         # `ros2 run` looks for executables in <prefix>/lib/<package>/. These launchers are
         # data files, so pip (wheel and editable) and colcon both install them there; the console
         # scripts below stay in <prefix>/bin. See the comment in setup.cfg.

@@ -18,7 +18,8 @@ from typing import Any, ClassVar, Mapping
 from domplane_ros.errors import ConfigError
 from domplane_ros.parameters import (check_value, default_params_yaml, FEATURE_KINDS,
                                      flatten_params, PARAMETERS, PARAMETERS_BY_NAME,
-                                     parameters_markdown, ParamSpec, POTENTIAL_NAMES)
+                                     parameters_markdown, ParamSpec, POTENTIAL_NAMES,
+                                     unknown_parameter_message)
 
 __all__ = [
     'ConfigError', 'EstimatorConfig', 'FEATURE_KINDS', 'FeatureConfig', 'HeadConfig',
@@ -26,6 +27,7 @@ __all__ = [
     'PlaneNodeConfig', 'POTENTIAL_NAMES', 'PriorConfig', 'SyncConfig', 'TrackingConfig',
     'TransportConfig', 'VerificationSettings', 'check_value', 'default_params_yaml',
     'flatten_params', 'load_params_file', 'one_shot_search', 'parameters_markdown',
+    'unknown_parameter_message',
 ]
 
 
@@ -94,6 +96,7 @@ class PriorConfig(_Section):
     baseline_over_height: tuple[float, float] = (0.05, 0.4)
     tilt_deg: tuple[float, float] = (10.0, 50.0)
     vergence_deg: tuple[float, float] = (-2.0, 4.0)
+    principal_point_px: tuple[float, ...] = ()
     samples: int = 5
     refine_best: int = 6
     screen_threshold_px: float = 12.0
@@ -182,19 +185,35 @@ class SyncConfig(_Section):
 
 @dataclass(frozen=True)
 class TransportConfig:
-    """QoS and diagnostics settings of the node (``qos.*``, ``diagnostics.*``)."""
+    """Input and diagnostics settings of the node.
+
+    ``qos.*``, ``diagnostics.*``, ``image_transport`` and ``camera_info.*``; the replay
+    ignores them.
+    """
 
     reliable: bool = False
     depth: int = 2
     diagnostics_period_s: float = 1.0
     silence_s: float = 1.0
+    image_transport: str = 'raw'
+    camera_info_topic: str = ''
+    camera_info_focal_tolerance: float = 0.1
+
+    _NAMES: ClassVar[dict[str, str]] = {
+        'reliable': 'qos.reliable', 'depth': 'qos.depth',
+        'diagnostics_period_s': 'diagnostics.period_s', 'silence_s': 'diagnostics.silence_s',
+        'image_transport': 'image_transport', 'camera_info_topic': 'camera_info.topic',
+        'camera_info_focal_tolerance': 'camera_info.focal_tolerance'}
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""
-        check_value(PARAMETERS_BY_NAME['qos.reliable'], self.reliable)
-        check_value(PARAMETERS_BY_NAME['qos.depth'], self.depth)
-        check_value(PARAMETERS_BY_NAME['diagnostics.period_s'], self.diagnostics_period_s)
-        check_value(PARAMETERS_BY_NAME['diagnostics.silence_s'], self.silence_s)
+        for attribute, name in self._NAMES.items():
+            check_value(PARAMETERS_BY_NAME[name], getattr(self, attribute))
+
+    @classmethod
+    def from_flat(cls, values: Mapping[str, Any]) -> TransportConfig:
+        """Build the settings from a flat mapping of dotted names to checked values."""
+        return cls(**{attribute: values[name] for attribute, name in cls._NAMES.items()})
 
 
 def _validate_section(obj: Any, section: str) -> None:
@@ -249,7 +268,7 @@ class PlaneNodeConfig:
         flat = flatten_params(params)
         unknown = sorted(set(flat) - set(PARAMETERS_BY_NAME))
         if unknown:
-            raise ConfigError(f'unknown parameter {unknown[0]!r}'
+            raise ConfigError(unknown_parameter_message(unknown[0])
                               + (f' (and {len(unknown) - 1} more)' if len(unknown) > 1 else ''))
         values = {spec.name: spec.default for spec in PARAMETERS}
         for name, value in flat.items():
@@ -288,10 +307,7 @@ class PlaneNodeConfig:
             tracking=TrackingConfig(**section('tracking')),
             head=HeadConfig(**section('head')),
             sync=SyncConfig(**section('sync')),
-            transport=TransportConfig(
-                reliable=values['qos.reliable'], depth=values['qos.depth'],
-                diagnostics_period_s=values['diagnostics.period_s'],
-                silence_s=values['diagnostics.silence_s']),
+            transport=TransportConfig.from_flat(values),
             initial_homography=tuple(values['initial_homography']),
         )
 

@@ -8,6 +8,7 @@ README's parameter table and the default params file are generated from.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import difflib
 import math
 from typing import Any, Mapping
 
@@ -15,6 +16,7 @@ from domplane_ros.errors import ConfigError, wire_repr
 
 POTENTIAL_NAMES = ('least_squares', 'truncated_quadratic', 'huber', 'geman_mcclure')
 FEATURE_KINDS = ('points', 'lines', 'both')
+IMAGE_TRANSPORTS = ('raw', 'compressed')
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('prior.vergence_deg', [-2.0, 4.0], 'range',
               "Vergence: the right camera's yaw toward the left camera, [min, max] degrees.",
               -45.0, 45.0),
+    ParamSpec('prior.principal_point_px', [], 'floats',
+              'Principal point [cx, cy] of both cameras in pixels; empty: the image centre '
+              '(set from camera_info when camera_info.topic is given).', 0.0, 1e5,
+              lengths=(0, 2)),
     ParamSpec('prior.samples', 5, 'int',
               'Samples per prior range for the candidate grid (samples^4 candidates).', 1, 12),
     ParamSpec('prior.refine_best', 6, 'int',
@@ -223,6 +229,19 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('sync.queue_size', 5, 'int',
               'Per-camera queue of the synchroniser; the oldest frame is dropped when full.',
               1, 1000),
+    ParamSpec('image_transport', 'raw', 'str',
+              "Image input of the node (image_transport's names): raw subscribes to "
+              'sensor_msgs/Image on left/image_raw and right/image_raw, compressed to '
+              'sensor_msgs/CompressedImage (JPEG or PNG) on <topic>/compressed, where <topic> '
+              'is the remapped image topic.', choices=IMAGE_TRANSPORTS),
+    ParamSpec('camera_info.topic', '', 'str',
+              'sensor_msgs/CameraInfo topic of the left camera (e.g. left/camera_info); '
+              'empty: none. When set, the first valid K narrows prior.focal_px to '
+              "K's focal length within camera_info.focal_tolerance and sets "
+              "prior.principal_point_px to K's principal point."),
+    ParamSpec('camera_info.focal_tolerance', 0.1, 'float',
+              'Relative tolerance of the focal length taken from camera_info: '
+              'prior.focal_px becomes f * [1 - t, 1 + t].', 0.0, 0.9),
     ParamSpec('qos.reliable', False, 'bool',
               'Subscribe with reliable QoS instead of sensor-data (best effort).'),
     ParamSpec('qos.depth', 2, 'int', 'Subscription queue depth.', 1, 100),
@@ -403,8 +422,29 @@ def flatten_params(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any
     return flat
 
 
-def default_params_yaml(node_name: str = 'plane_node') -> str:
-    """Return a ROS 2 parameters file with every parameter at its default, commented."""
+def nearest_parameter(name: str) -> str | None:
+    """Return the declared parameter name closest to ``name``, or None if none is close."""
+    matches = difflib.get_close_matches(name, list(PARAMETERS_BY_NAME), n=1, cutoff=0.6)
+    if not matches:
+        # A right leaf under a wrong or missing section ('focal_px' for 'prior.focal_px').
+        leaf = name.rsplit('.', 1)[-1]
+        matches = [spec.name for spec in PARAMETERS if spec.name.rsplit('.', 1)[-1] == leaf]
+    return matches[0] if matches else None
+
+
+def unknown_parameter_message(name: str) -> str:
+    """Return "unknown parameter 'x'" with the nearest declared name, if one is close."""
+    nearest = nearest_parameter(name)
+    hint = f' (did you mean {nearest!r}?)' if nearest else ''
+    return f'unknown parameter {name!r}{hint}'
+
+
+def default_params_yaml(node_name: str = '/**') -> str:
+    """Return a ROS 2 parameters file with every parameter at its default, commented.
+
+    The block is keyed ``/**`` by default, so it applies to the node under any name or
+    namespace (``-r __node:=front_plane``) and to ``plane_replay``.
+    """
     lines = [f'{node_name}:', '  ros__parameters:']
     for spec in PARAMETERS:
         value = spec.default

@@ -57,6 +57,7 @@ def test_ament_index_marker_and_share_files(install_prefix):
     package_xml = install_prefix / 'share' / PACKAGE / 'package.xml'
     assert ElementTree.parse(package_xml).getroot().findtext('name') == PACKAGE
     assert (install_prefix / 'share' / PACKAGE / 'config/plane_node.yaml').is_file()
+    assert (install_prefix / 'share' / PACKAGE / 'launch/plane_node.launch.py').is_file()
 
 
 @pytest.mark.parametrize('name', LAUNCHERS)

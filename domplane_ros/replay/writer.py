@@ -1,10 +1,10 @@
 """Writing plane_node's outputs into a bag that appears only when it is complete.
 
-:class:`BagOutput` writes ``/plane/homography``, ``/plane/mask`` and ``/diagnostics`` (rosbags
-message types) into a hidden temporary folder next to the output and renames it into place at
-:meth:`BagOutput.commit`; :func:`keep_partial` commits what a failed run wrote as
-``OUTPUT_BAG.incomplete`` instead. :class:`DiagnosticsClock` says when a diagnostics message
-is due, in bag time.
+:class:`BagOutput` writes ``/plane/homography``, ``/plane/mask``, ``/plane/result`` and
+``/diagnostics`` (rosbags message types) into a hidden temporary folder next to the output
+and renames it into place at :meth:`BagOutput.commit`; :func:`keep_partial` commits what a
+failed run wrote as ``OUTPUT_BAG.incomplete`` instead. :class:`DiagnosticsClock` says when a
+diagnostics message is due, in bag time.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from domplane_ros.core.image import gray_to_image_fields, rgb_to_image_fields
 from domplane_ros.errors import BagError, clip_text
 from domplane_ros.replay.reader import BagReadError, IMAGE_TYPE, ReplayedFrame, typestore
 from domplane_ros.stream.frame import debug_overlay
-from domplane_ros.stream.status import STATUS_NAME
+from domplane_ros.stream.status import result_status, RESULT_STATUS_NAME, STATUS_NAME
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 
@@ -31,6 +31,7 @@ DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 
 HOMOGRAPHY_TOPIC = '/plane/homography'
 MASK_TOPIC = '/plane/mask'
+RESULT_TOPIC = '/plane/result'
 DEBUG_IMAGE_TOPIC = '/plane/debug_image'
 DIAGNOSTICS_TOPIC = '/diagnostics'
 
@@ -80,7 +81,7 @@ class BagOutput:
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmpdir = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.partial-',
                                              dir=self.path.parent))
-        self.counts = {HOMOGRAPHY_TOPIC: 0, MASK_TOPIC: 0, DIAGNOSTICS_TOPIC: 0}
+        self.counts = {HOMOGRAPHY_TOPIC: 0, MASK_TOPIC: 0, RESULT_TOPIC: 0, DIAGNOSTICS_TOPIC: 0}
         self._closed = False
         try:
             self._writer = Writer(self._tmpdir / self.path.name, version=9,
@@ -90,6 +91,8 @@ class BagOutput:
             self._conn_h = self._writer.add_connection(HOMOGRAPHY_TOPIC, HOMOGRAPHY_TYPE,
                                                        typestore=ts)
             self._conn_mask = self._writer.add_connection(MASK_TOPIC, IMAGE_TYPE, typestore=ts)
+            self._conn_result = self._writer.add_connection(RESULT_TOPIC, DIAGNOSTICS_TYPE,
+                                                            typestore=ts)
             self._conn_diag = self._writer.add_connection(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE,
                                                           typestore=ts)
             self._conn_debug = None
@@ -127,10 +130,10 @@ class BagOutput:
         self.counts[topic] += 1
 
     def write_frame(self, frame: ReplayedFrame) -> None:
-        """Write a processed pair: its homography (if a plane was found), mask, debug image.
+        """Write a processed pair: homography (with a plane), result, mask and debug image.
 
-        All are written at the left image's header stamp; the mask and the debug image (only
-        with ``debug_images``) carry the left header.
+        All are written at the left image's header stamp; the result, the mask and the debug
+        image (only with ``debug_images``) carry the left header, as the node publishes them.
         """
         header = frame.pair.left.header
         stamp = frame.pair.left_stamp_ns
@@ -147,6 +150,12 @@ class BagOutput:
             is_bigendian=fields['is_bigendian'], step=fields['step'],
             data=np.frombuffer(fields['data'], np.uint8))
         self._write(self._conn_mask, MASK_TOPIC, stamp, mask)
+        level, message, values = result_status(frame)
+        self._write(self._conn_result, RESULT_TOPIC, stamp, self._DiagnosticArray(
+            header=mask.header, status=[self._DiagnosticStatus(
+                level=level, name=RESULT_STATUS_NAME, message=message,
+                hardware_id=_DIAGNOSTICS_HARDWARE_ID,
+                values=[self._KeyValue(key=k, value=v) for k, v in values])]))
         if self._conn_debug is not None:
             self._write_debug_image(frame, mask.header)
 

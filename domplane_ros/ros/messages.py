@@ -7,6 +7,7 @@ from typing import Any, Iterable
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from domplane_ros.config import ParamSpec
 from domplane_ros.core.image import gray_to_image_fields, rgb_to_image_fields
+from domplane_ros.stream.status import result_status, RESULT_STATUS_NAME
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType
@@ -24,7 +25,7 @@ _TYPES = {
 
 # Parameters that only take effect when the node starts.
 READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s',
-                       'head.joint_states_topic'})
+                       'head.joint_states_topic', 'image_transport', 'camera_info.topic'})
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
@@ -62,6 +63,31 @@ def homography_msg(matrix: np.ndarray) -> Float64MultiArray:
     msg.layout.data_offset = 0
     msg.data = [float(v) for v in np.asarray(matrix, dtype=np.float64).ravel()]
     return msg
+
+
+def result_msg(header: Header, hardware_id: str, frame: Any) -> DiagnosticArray:
+    """Build the stamped per-pair result: a DiagnosticArray with one status named ``plane``.
+
+    The array's header is the left image's (stamp and frame id), so the result matches the
+    mask of the same pair; the status is :func:`~domplane_ros.stream.status.result_status`.
+
+    Args:
+        header: The left image's header.
+        hardware_id: The node's fully qualified name.
+        frame: The processed pair (a ``ProcessedPair``).
+
+    Returns:
+        The message.
+
+    """
+    level, message, values = result_status(frame)
+    status = DiagnosticStatus(level=bytes([level]), name=RESULT_STATUS_NAME,
+                              hardware_id=hardware_id, message=message)
+    status.values = [KeyValue(key=k, value=v) for k, v in values]
+    array = DiagnosticArray()
+    array.header = header
+    array.status = [status]
+    return array
 
 
 def stamped_header(stamp_ns: int, frame_id: str) -> Header:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any, Mapping, Sequence
 
@@ -163,3 +164,38 @@ def _result_values(result: Any, joint_speed: float | None,
         ('final energy', f'{result.estimate.final_energy:.4g}' if ok else 'n/a'),
         ('converged', bool(ok and result.estimate.converged)),
     ]
+
+
+RESULT_STATUS_NAME = 'plane'
+"""``DiagnosticStatus.name`` of the per-pair result (``plane/result``)."""
+
+
+def result_status(frame: Any) -> tuple[int, str, list[tuple[str, str]]]:
+    """Return the per-pair result's level, message and values (``plane/result``).
+
+    The level is OK with a published plane, WARN without; the message is the lock state
+    (and the reason when there is no plane). The values, all strings: ``state`` (locked,
+    tracking, searching), ``plane`` (true or false), ``confidence`` (0 to 1; 0 without a
+    plane), ``homography`` (a JSON list of the 9 row-major values of H, left pixel to right
+    pixel with ``H[2][2] = 1``; ``[]`` without a plane) and ``reason`` ('' with a plane).
+
+    Args:
+        frame: A :class:`~domplane_ros.stream.session.ProcessedPair` (``result``,
+            ``publishable``).
+
+    Returns:
+        ``(level, message, values)``; the node and the replay build their message from it.
+
+    """
+    result = frame.result
+    plane = bool(frame.publishable)
+    values = ([float(v) for v in np.asarray(result.homography, dtype=np.float64).ravel()]
+              if plane else [])
+    reason = '' if plane else (result.reason or 'homography not finite')
+    message = result.state if plane else f'{result.state}: {reason}'
+    return (OK if plane else WARN, message, [
+        ('state', result.state),
+        ('plane', 'true' if plane else 'false'),
+        ('confidence', repr(float(result.confidence) if plane else 0.0)),
+        ('homography', json.dumps(values)),
+        ('reason', reason)])
