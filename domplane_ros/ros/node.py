@@ -363,7 +363,9 @@ class PlaneNode(Node):
         level, message, values = self.session.status(
             time.monotonic(), dropped_busy=self.slot.dropped, joint_speed=self.joint_speed(),
             implausible_joint_speed=self.implausible_joint_speed(),
-            implausible_joint_states=self.implausible_joint_states)
+            # Counted only with a joint topic: without one the keys stay the replay's.
+            implausible_joint_states=(self.implausible_joint_states
+                                      if self._joint_sub is not None else None))
         if message.startswith('no images on '):
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in self.session.last_cameras)

@@ -315,7 +315,8 @@ class StreamSession:
 
     def status(self, now: float, rate: float | None = None, dropped_busy: int = 0,
                joint_speed: float | None = None, implausible_joint_speed: float | None = None,
-               implausible_joint_states: int = 0) -> tuple[int, str, list[tuple[str, str]]]:
+               implausible_joint_states: int | None = None
+               ) -> tuple[int, str, list[tuple[str, str]]]:
         """Return the ``/diagnostics`` status and start a new period.
 
         Args:
@@ -325,7 +326,8 @@ class StreamSession:
             dropped_busy: Pairs the adapter replaced before its worker took them.
             joint_speed: The head's largest joint speed in rad/s, or None.
             implausible_joint_speed: A recent implausible joint speed (rad/s), or None.
-            implausible_joint_states: Joint states flagged implausible so far.
+            implausible_joint_states: Joint states flagged implausible so far (None: no
+                joint input, no key).
 
         Returns:
             ``(level, message, values)``, see :func:`plane_status`.

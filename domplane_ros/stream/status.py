@@ -24,7 +24,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
                  input_warning: str = '', cameras: Sequence[tuple[str, int, float, float]] = (),
                  silence_s: float = math.inf, joint_speed: float | None = None,
                  implausible_joint_speed: float | None = None,
-                 implausible_joint_states: int = 0) -> tuple[int, str, list[tuple[str, str]]]:
+                 implausible_joint_states: int | None = None
+                 ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
     Args:
@@ -51,7 +52,9 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         joint_speed: The head's largest joint speed in rad/s, or None without joint input.
         implausible_joint_speed: A recent joint speed above ``head.max_joint_velocity``
             (rad/s), ignored as a hint; shown instead of the joint speed.
-        implausible_joint_states: Joint states with such a speed so far.
+        implausible_joint_states: Joint states with such a speed so far, or None without
+            joint input (then the key ``joint states implausible`` is left out, as the
+            replay, which has no joint input, leaves it out).
 
     Returns:
         ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
@@ -75,7 +78,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('decode errors', decode_errors),
         ('lock state', lock_state),
         *_result_values(last_result, joint_speed, implausible_joint_speed),
-        ('joint states implausible', implausible_joint_states),
+        *([('joint states implausible', implausible_joint_states)]
+          if implausible_joint_states is not None else []),
         ('re-initialisations', reinitialisations),
         ('last error', last_error or 'none'),
     ]
