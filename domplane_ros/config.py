@@ -54,6 +54,7 @@ class FeatureConfig(_Section):
     grid_rows: int = 4
     grid_cols: int = 4
     roi: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
+    max_width: int = 1280
     kind: str = 'points'
     max_lines: int = 150
     min_line_length_px: float = 25.0
@@ -154,7 +155,7 @@ class TrackingConfig(_Section):
 
     enabled: bool = True
     max_points: int = 150
-    window_px: int = 15
+    window_px: int = 11
     pyramid_levels: int = 3
     forward_backward_px: float = 1.0
     min_tracks: int = 20

@@ -56,6 +56,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('features.roi', [0.0, 0.0, 1.0, 1.0], 'floats',
               'Region of interest in the left image as fractions [x0, y0, x1, y1] '
               '(0..1, x0 < x1, y0 < y1).', 0.0, 1.0, lengths=(4,)),
+    ParamSpec('features.max_width', 1280, 'int',
+              'Working resolution: corners and lines are detected, corners tracked and the mask '
+              'computed on the Gaussian pyramid level (halvings) whose width is at most this; '
+              'the plane is estimated in full pixels. features.*, tracking.* and mask.* pixel '
+              'sizes are at that level. 0: full resolution.', 0, 100000),
     ParamSpec('features.kind', 'points', 'str',
               'Features the plane is estimated from: points (corners), lines (straight line '
               'segments) or both.', choices=FEATURE_KINDS),
@@ -198,8 +203,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "Most corners tracked per camera (the previous frame's first, i.e. strongest "
               'per grid cell).',
               8, 5000),
-    ParamSpec('tracking.window_px', 15, 'int',
-              'Side of the pyramidal Lucas-Kanade window, pixels.', 5, 101),
+    ParamSpec('tracking.window_px', 11, 'int',
+              'Side of the pyramidal Lucas-Kanade window, pixels at the working resolution '
+              '(features.max_width).', 5, 101),
     ParamSpec('tracking.pyramid_levels', 3, 'int',
               'Pyramid levels of the Lucas-Kanade tracker above full resolution.', 0, 8),
     ParamSpec('tracking.forward_backward_px', 1.0, 'float',

@@ -135,17 +135,27 @@ class TwoStep:
         """Return the (rows, 2) predictions of every row under ``h``."""
         return apply_homography(h, self.src)
 
-    def match(self, pred: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def match(self, pred: np.ndarray, bound: float | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return per-feature closest distances and indices, and per-row closest positions.
 
         The closest position of a point row is its closest right point, of a segment's
-        endpoint row its projection onto the segment's closest right line.
+        endpoint row its projection onto the segment's closest right line. With ``bound``,
+        a point whose closest right point is ``bound`` or further gets distance inf, index
+        -1 and its own prediction as closest position (the query stops early there).
         """
         n = self.n_points
         r = np.zeros(self.n_features)
         idx = np.zeros(self.n_features, np.int64)
         closest = np.empty_like(pred)
-        if n:
+        if n and bound is not None:
+            r[:n], idx[:n] = self.tree.query(pred[:n], distance_upper_bound=bound)
+            far = np.flatnonzero(idx[:n] >= self.right.shape[0])
+            idx[far] = 0
+            closest[:n] = self.right[idx[:n]]
+            idx[far] = -1
+            closest[far] = pred[far]
+        elif n:
             r[:n], idx[:n] = self.tree.query(pred[:n])
             closest[:n] = self.right[idx[:n]]
         if self.n_lines:
@@ -162,7 +172,7 @@ class TwoStep:
 
         Distances, indices, penalties and terms are per feature; aux and closest per row.
         """
-        r, idx, closest = self.match(pred)
+        r, idx, closest = self.match(pred, potential.saturation_px)
         s = potential.step(r)
         frac = np.divide(s, r, out=np.zeros_like(r), where=r > 0)
         aux = pred + (closest - pred) * frac[self.row_feature, None]
@@ -247,7 +257,7 @@ class TwoStep:
             if check_homography(h_new):
                 break
             pred_new = self.apply(h_new)
-            r_new, idx_new, closest_new = self.match(pred_new)
+            r_new, idx_new, closest_new = self.match(pred_new, threshold_px)
             same = np.array_equal(idx_new[inl], idx[inl]) and np.array_equal(
                 r_new < threshold_px, inl)
             settled = float(np.max(np.abs(pred_new - pred))) < _LINE_POLISH_TOLERANCE_PX
@@ -345,6 +355,7 @@ class TwoStep:
             h, r, idx = self.polish(h, options.threshold_px, matched)
         else:
             _, r, idx, _ = matched
+        r, idx = self._complete(h, r, idx)
         inliers = r < options.threshold_px
         if np.count_nonzero(inliers) < options.min_inliers:
             return FailedEstimate(
@@ -359,6 +370,16 @@ class TwoStep:
             stage_trace=stage_trace, converged=converged, final_energy=float(trace[-1]),
             potential=options.potential, line_inliers=inliers[n:], line_matches=idx[n:],
             line_residuals_px=r[n:], left_lines=self.left_segments)
+
+    def _complete(self, h: np.ndarray, r: np.ndarray, idx: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Return the distances and indices with the points a bounded query missed filled in."""
+        far = np.flatnonzero(idx[:self.n_points] < 0)
+        if far.size == 0:
+            return r, idx
+        r, idx = r.copy(), idx.copy()
+        r[far], idx[far] = self.tree.query(apply_homography(h, self.left[far]))
+        return r, idx
 
     def screening_energy(self, candidates: np.ndarray, threshold_px: float) -> np.ndarray:
         """Return (M,) truncated closest-feature energies of candidate homographies.

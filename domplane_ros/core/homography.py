@@ -18,6 +18,9 @@ import numpy as np
 # (finite) so that a closest-point search treats them as unmatched.
 _MIN_W = 1e-9
 _FAR_PX = 1e9
+# Public names for code that maps many points at once as apply_homography does.
+MIN_W = _MIN_W
+FAR_PX = _FAR_PX
 # A point set whose second singular value (centred) is at most this fraction of its first is
 # collinear: it cannot fix a homography.
 _COLLINEAR_RATIO = 1e-6

@@ -36,6 +36,9 @@ class Potential:
 
     name = 'base'
     redescending = False
+    # Closest distance from which a point's step is 0 and its penalty constant (None: no such
+    # distance): a closest-point query may stop there (cKDTree distance_upper_bound).
+    saturation_px: float | None = None
 
     def __init__(self, lambda_weight: float, threshold_px: float) -> None:
         """Store and check the parameters."""
@@ -104,6 +107,8 @@ class TruncatedQuadratic(Potential):
         """Derive ``alpha`` from the threshold."""
         super().__init__(lambda_weight, threshold_px)
         self.alpha = 0.5 * self.lambda_weight * self.threshold_px ** 2
+        # From r = t on, s = 0 and P(r) = alpha (mu t^2 / 2 >= alpha as mu >= lambda).
+        self.saturation_px = self.threshold_px
 
     def penalty(self, distance: np.ndarray) -> np.ndarray:
         """Return ``min(alpha, mu d^2 / 2)``."""

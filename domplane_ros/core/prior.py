@@ -22,10 +22,12 @@ estimator refines them all at once, the pipeline a few per frame.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Callable, Collection, Iterable, Sequence, TYPE_CHECKING
 
-from domplane_ros.core.homography import apply_homography
+import cv2
+from domplane_ros.core.homography import FAR_PX, MIN_W
 from domplane_ros.core.result import better_estimate, FailedEstimate, PlaneEstimate
 import numpy as np
 
@@ -125,6 +127,13 @@ def prior_candidates(prior: PriorConfig, width: int, height: int) -> np.ndarray:
     """
     if width <= 0 or height <= 0:
         raise ValueError(f'image size must be positive, got {width}x{height}')
+    # The grid depends only on the (frozen, hashable) prior and the size: computed once per
+    # process, so a fresh pipeline's cold start does not pay for it again.
+    return _candidate_grid(prior, int(width), int(height)).copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _candidate_grid(prior: PriorConfig, width: int, height: int) -> np.ndarray:
     out = [plane_homography(f, bh, tilt, verg, width, height, prior.principal_point_px)
            for f in _samples(prior.focal_px, prior.samples)
            for bh in _samples(prior.baseline_over_height, prior.samples)
@@ -138,7 +147,11 @@ def screen_candidates(candidates: np.ndarray, left_points: np.ndarray, right_tre
     """Score candidates by a cheap truncated closest-point energy (lower is better).
 
     The energy of a candidate is ``sum_i min(d_i, t)^2`` with ``d_i`` the distance from the
-    predicted left point to its closest right point: one tree query for all candidates.
+    predicted left point to its closest right point. It is computed in two passes: a coarse
+    one for every candidate, reading ``d_i`` from a distance transform of the right points
+    rasterised on a grid (:func:`coarse_screening`, off by about a cell), then the exact one
+    (one tree query) for the :data:`SCREEN_EXACT` best of the coarse pass. Those get their
+    exact energies; the others rank after all of them, in their coarse order.
 
     Args:
         candidates: (M, 3, 3) float64 homographies.
@@ -150,11 +163,71 @@ def screen_candidates(candidates: np.ndarray, left_points: np.ndarray, right_tre
         (M,) float64 screening energies.
 
     """
+    pred = _predict_all(candidates, left_points)
     m = candidates.shape[0]
+    if m <= SCREEN_EXACT:
+        return _exact_energy(pred, right_tree, threshold_px)
+    coarse = coarse_screening(pred, right_tree.data, threshold_px)
+    best = np.argsort(coarse, kind='stable')[:SCREEN_EXACT]
+    costs = coarse + (1.0 + left_points.shape[0] * threshold_px ** 2)
+    costs[best] = _exact_energy(pred[best], right_tree, threshold_px)
+    return costs
+
+
+# Candidates screened exactly after the coarse pass (the pipeline refines at most
+# prior.refine_best of them, 6 by default).
+SCREEN_EXACT = 64
+# Cells of the coarse pass's grid: at most this many along the right points' wider side.
+_SCREEN_GRID = 320
+
+
+def _predict_all(candidates: np.ndarray, left_points: np.ndarray) -> np.ndarray:
+    """Return (M, N, 2) predictions of every left point under every candidate."""
     n = left_points.shape[0]
-    pred = np.concatenate([apply_homography(h, left_points) for h in candidates])
-    d, _ = right_tree.query(pred, distance_upper_bound=threshold_px)
+    homogeneous = np.einsum('mij,nj->mni', candidates,
+                            np.column_stack([left_points, np.ones(n)]))
+    w = homogeneous[..., 2:]
+    w = np.where(np.abs(w) < MIN_W, MIN_W, w)  # as apply_homography: far, finite
+    return np.clip(homogeneous[..., :2] / w, -FAR_PX, FAR_PX)
+
+
+def _exact_energy(pred: np.ndarray, right_tree: cKDTree, threshold_px: float) -> np.ndarray:
+    """Return (M,) ``sum min(d, t)^2`` of (M, N, 2) predictions by one tree query."""
+    m, n = pred.shape[:2]
+    d, _ = right_tree.query(pred.reshape(-1, 2), distance_upper_bound=threshold_px)
     d = np.minimum(d, threshold_px).reshape(m, n)
+    return np.sum(d * d, axis=1)
+
+
+def coarse_screening(pred: np.ndarray, right_points: np.ndarray, threshold_px: float
+                     ) -> np.ndarray:
+    """Return (M,) ``sum min(d, t)^2`` with ``d`` read from a distance transform.
+
+    The right points are rasterised on a grid of cells (at most ``_SCREEN_GRID`` along the
+    wider side of their bounding box grown by ``t``); ``cv2.distanceTransform`` gives each
+    cell's distance to the nearest occupied cell. A prediction outside the grid is at least
+    ``t`` from every right point. The distances are off by at most about one cell diagonal.
+
+    Args:
+        pred: (M, N, 2) float64 predictions.
+        right_points: (K, 2) float64 right points.
+        threshold_px: Truncation ``t``, pixels.
+
+    """
+    low = right_points.min(axis=0) - threshold_px
+    high = right_points.max(axis=0) + threshold_px
+    cell = max(1.0, float(np.max(high - low)) / _SCREEN_GRID)
+    cols, rows = (np.ceil((high - low) / cell).astype(int) + 1)
+    occupied = np.full((rows, cols), 255, np.uint8)
+    idx = np.rint((right_points - low) / cell).astype(int)
+    occupied[idx[:, 1], idx[:, 0]] = 0
+    dist = cell * cv2.distanceTransform(occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    grid = np.rint((pred - low) / cell)
+    inside = ((grid[..., 0] >= 0) & (grid[..., 0] < cols)
+              & (grid[..., 1] >= 0) & (grid[..., 1] < rows))
+    d = np.full(pred.shape[:2], threshold_px, np.float64)
+    gi = grid[inside].astype(int)
+    d[inside] = np.minimum(dist[gi[:, 1], gi[:, 0]], threshold_px)
     return np.sum(d * d, axis=1)
 
 

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field, replace
 import math
 import time
 
+import cv2
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import detect_corners, Features
@@ -21,6 +22,7 @@ from domplane_ros.core.image import check_gray
 from domplane_ros.core.lines import detect_lines
 from domplane_ros.core.mask import plane_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
+from domplane_ros.core.pyramid import level_homography, motion_to_full, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import camera_motion, predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
@@ -69,7 +71,7 @@ class _Search:
 
 @dataclass
 class _Previous:
-    """The previous frame's images and corners, for tracking."""
+    """The previous frame's working-level images and corners (working pixels), for tracking."""
 
     left: np.ndarray
     right: np.ndarray
@@ -183,20 +185,23 @@ class PlanePipeline:
         fast = joint_speed is not None and abs(joint_speed) > cfg.pipeline.fast_joint_velocity
         if check.refused:
             return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
-        feats = _detect(left, right, cfg)
+        work = (WorkingImage.of(left, cfg.features.max_width),
+                WorkingImage.of(right, cfg.features.max_width))
+        feats, track_pts = _detect(*work, cfg)
         t1 = time.perf_counter()
-        track_pts = self._tracking_points(left, right, feats)
-        motions = self._camera_motions(left, right)
+        track_pts = self._tracking_points(*work, track_pts)
+        motions = self._camera_motions(*work)
         t2 = time.perf_counter()
         step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
         t3 = time.perf_counter()
-        estimate, h, mask = self._publish(step, left, right, feats)
+        estimate, h, mask = self._publish(step, *work, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
             self.counts.add('too_few_features')
             reason += f' (left {texture_note(left)}; right {texture_note(right)})'
         if not step.keep_previous:
-            self._previous = _Previous(left.copy(), right.copy(), *track_pts)
+            self._previous = _Previous(*(image.image.copy() if image.level == 0 else image.image
+                                         for image in work), *track_pts)
         t4 = time.perf_counter()
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
                            estimate=estimate, left_points=feats.left_points,
@@ -222,19 +227,24 @@ class PlanePipeline:
             self._search_step(step, feats, problem, size, motions)
         return step
 
-    def _publish(self, step: _Step, left: np.ndarray, right: np.ndarray, feats: Features
+    def _publish(self, step: _Step, left: WorkingImage, right: WorkingImage, feats: Features
                  ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray]:
-        """Return the frame's estimate, homography and mask; keep an accepted plane."""
+        """Return the frame's estimate, homography and mask; keep an accepted plane.
+
+        The mask is computed on the working level (``mask.scale`` of it) and scaled up to the
+        full image, so its cost grows with the working resolution, not the camera's.
+        """
         estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
         if step.accepted:
             h = estimate.homography
-            mask = plane_mask(left, right, h, self.config.mask)
+            mask = _full_mask(left, plane_mask(left.image, right.image,
+                                               level_homography(h, left.scale), self.config.mask))
             self._last_h = h
             self._last_energy_per_point = estimate.final_energy / max(feats.n_left, 1)
             self.stats.succeeded += 1
         else:
             h = None
-            mask = np.zeros(left.shape, np.uint8)
+            mask = np.zeros(left.full.shape, np.uint8)
             self.stats.failed += 1
         return estimate, h, mask
 
@@ -258,31 +268,36 @@ class PlanePipeline:
                                        'mask': 0.0, 'total': total_ms},
                            warnings=warnings, fast_motion=fast)
 
-    def _tracking_points(self, left: np.ndarray, right: np.ndarray,
-                         feats: Features) -> tuple[np.ndarray, np.ndarray]:
-        """Return the corners to track from this frame (detected if only lines are used)."""
+    def _tracking_points(self, left: WorkingImage, right: WorkingImage,
+                         corners: tuple[np.ndarray, np.ndarray]
+                         ) -> tuple[np.ndarray, np.ndarray]:
+        """Return the working-level corners to track from (detected if only lines are used)."""
         if not self.config.tracking.enabled or self.config.features.kind != 'lines':
-            return feats.left_points, feats.right_points
-        return (detect_corners(left, self.config.features),
-                detect_corners(right, self.config.features))
+            return corners
+        return (detect_corners(left.image, self.config.features),
+                detect_corners(right.image, self.config.features))
 
     # --- Temporal prediction ---------------------------------------------------------------
-    def _camera_motions(self, left: np.ndarray, right: np.ndarray
+    def _camera_motions(self, left: WorkingImage, right: WorkingImage
                         ) -> tuple[np.ndarray, np.ndarray] | None:
-        """Return ``(M_left, M_right)`` from the previous frame, or None."""
+        """Return ``(M_left, M_right)`` (full pixels) from the previous frame, or None.
+
+        Tracked on the working level (:mod:`domplane_ros.core.pyramid`), scaled to full pixels.
+        """
         cfg = self.config.tracking
         prev = self._previous
-        if not cfg.enabled or prev is None:
+        if not cfg.enabled or prev is None or prev.left.shape != left.image.shape:
             return None
         if self._state == SEARCHING and (self._search is None or self._search.best is None):
             return None
-        motion_left = camera_motion(prev.left, left, prev.left_points, cfg)
+        motion_left = camera_motion(prev.left, left.image, prev.left_points, cfg)
         if not motion_left.ok:
             return None
-        motion_right = camera_motion(prev.right, right, prev.right_points, cfg)
+        motion_right = camera_motion(prev.right, right.image, prev.right_points, cfg)
         if not motion_right.ok:
             return None
-        return motion_left.homography, motion_right.homography
+        return (motion_to_full(motion_left.homography, left.scale),
+                motion_to_full(motion_right.homography, right.scale))
 
     def _propagate(self, h: np.ndarray, motions: tuple[np.ndarray, np.ndarray] | None
                    ) -> np.ndarray | None:
@@ -544,22 +559,43 @@ class _Step:
     right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
 
 
-def _detect(left: np.ndarray, right: np.ndarray, cfg: PlaneNodeConfig) -> Features:
-    """Return left and right corners and segments, as ``features.kind`` asks."""
+def _detect(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfig
+            ) -> tuple[Features, tuple[np.ndarray, np.ndarray]]:
+    """Return corners and segments (full pixels) as ``features.kind`` asks.
+
+    Detected on the working level (:mod:`domplane_ros.core.pyramid`) and scaled to full
+    pixels. Also returns the working-level corners, which the tracker uses.
+    """
     kind = cfg.features.kind
     none_pts = np.zeros((0, 2))
     none_seg = np.zeros((0, 4))
     if kind == 'lines':
+        corners = (none_pts, none_pts)
         left_pts = right_pts = none_pts
     else:
-        left_pts = detect_corners(left, cfg.features)
-        right_pts = detect_corners(right, cfg.features)
+        corners = (detect_corners(left.image, cfg.features),
+                   detect_corners(right.image, cfg.features))
+        left_pts, right_pts = (_full_corners(image, points)
+                               for image, points in zip((left, right), corners))
     if kind == 'points':
         left_seg = right_seg = none_seg
     else:
-        left_seg = detect_lines(left, cfg.features)
-        right_seg = detect_lines(right, cfg.features)
-    return Features(left_pts, right_pts, left_seg, right_seg)
+        left_seg = left.scale * detect_lines(left.image, cfg.features)
+        right_seg = right.scale * detect_lines(right.image, cfg.features)
+    return Features(left_pts, right_pts, left_seg, right_seg), corners
+
+
+def _full_corners(image: WorkingImage, corners: np.ndarray) -> np.ndarray:
+    """Return working-level corners in full pixels."""
+    return corners if image.level == 0 else image.scale * corners
+
+
+def _full_mask(image: WorkingImage, mask: np.ndarray) -> np.ndarray:
+    """Return a working-level mask at the full image's size (nearest neighbour)."""
+    if image.level == 0:
+        return mask
+    height, width = image.full.shape
+    return cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)
 
 
 def _timings_ms(t0: float, t1: float, t2: float, t3: float, t4: float) -> dict[str, float]:

@@ -1,36 +1,114 @@
-"""Pipeline benchmark: per-pair latency of the full pipeline, and end-to-end latency over DDS.
+"""Pipeline benchmark: every per-pair cost beside ORB + BF + MAGSAC++ on the same frames.
 
 Run ``python -m domplane_ros.tools.bench_pipeline`` (or ``make bench``). One core (BLAS and OpenCV
-pinned to one thread). It prints:
+pinned to one thread, :func:`~domplane_ros.tools.common.one_core`); the machine is named. Each
+row times domplane_ros and the baseline (decode + ORB, 1000 features + brute-force Hamming
+matching with cross-check + ``cv2.findHomography`` USAC_MAGSAC) on the same messages, pair by
+pair interleaved, so a noisy machine slows both alike; ratios are ORB / ours. Rows:
 
-* per-pair latency of decode + features + warm-started estimate + mask on a rendered moving
-  stereo sequence at 640x480 and 1280x720, median and p95 (and of the bad-input checks of
-  :class:`~domplane_ros.stream.health.PairChecks` alone), beside a baseline run in the same
-  process on the same messages: decode + ORB (1000 features) + brute-force Hamming matching +
-  ``cv2.findHomography`` with USAC_MAGSAC;
-* end-to-end latency through DDS on loopback (image header stamp to the mask's arrival at a
-  subscriber) with a publisher at 30 Hz into a live ``plane_node`` in the same process.
+* ``warm WxH``: decode + the whole ``PlanePipeline.process`` (features, tracking and
+  prediction, warm-started estimate, verification, mask) on a rendered moving sequence at
+  640x480, 1280x720 and 3840x2160 (the 4K frames are the 1280x720 renders upscaled 3x, bicubic,
+  with the truth scaled: the renderer is too slow at 4K), with the median transfer error;
+* ``of which tracker`` / ``of which mask``: those stages' own times in the same pairs;
+* ``cold 640x480``: a fresh pipeline per pair (the whole prior search, the coarse candidates and
+  the verification) on rendered scenes, with how many pairs published a plane on that first
+  pair, how many of those are correct (< 1 px) and the precision (correct / published);
+* ``lines (both)``: the warm 640x480 pair with ``features.kind: both`` beside ``points``
+  (the ratio is both / points);
+* end-to-end latency through DDS on loopback (image header stamp to the mask's arrival) with a
+  publisher at 30 Hz into a live ``plane_node`` in this process, at 640x480 and 3840x2160.
+
+A PNG bar chart of the medians (p95 as whiskers) is written to ``--out``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass, field, replace
+import functools
+from pathlib import Path
 import sys
 import time
 from typing import Any, Callable
 
 import cv2
-from domplane_ros.config import PlaneNodeConfig, PriorConfig
+from domplane_ros.config import FeatureConfig, PlaneNodeConfig, PriorConfig
+from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.image import message_to_gray
-from domplane_ros.sim.generators import scene_sequence
-from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
-from domplane_ros.stream.health import PairChecks
+from domplane_ros.sim.generators import random_scene, scene_sequence
+from domplane_ros.sim.truth import every_floor_pixel
 from domplane_ros.stream.pipeline import PlanePipeline
-from domplane_ros.tools.common import (machine_name, mono8_message, one_core, prior_around,
-                                       tool_parser)
+from domplane_ros.tools.common import (add_output_argument, machine_name, mono8_message,
+                                       one_core, prior_around, tool_parser)
 import numpy as np
 
+_RENDER_LIMIT = (1280, 720)  # larger sizes are upscaled renders (the renderer is slow)
 
-def _orb_pipeline(orb, matcher, left_msg, right_msg) -> np.ndarray | None:
+
+@dataclass
+class BenchFrame:
+    """One stereo pair as messages, with its truth in the pair's own pixels."""
+
+    left: Any
+    right: Any
+    homography: np.ndarray
+    floor: np.ndarray
+
+    def error(self, h: np.ndarray | None) -> float:
+        """Return the mean transfer error over the floor pixels (inf without H)."""
+        if h is None:
+            return float('inf')
+        diff = apply_homography(h, self.floor) - apply_homography(self.homography, self.floor)
+        return float(np.mean(np.linalg.norm(diff, axis=1)))
+
+
+@dataclass
+class Row:
+    """One benchmark row: our times, the baseline's on the same pairs, errors, a note."""
+
+    name: str
+    ours: list[float] = field(default_factory=list)
+    base: list[float] = field(default_factory=list)
+    ours_err: list[float] = field(default_factory=list)
+    base_err: list[float] = field(default_factory=list)
+    note: str = ''
+    base_name: str = 'ORB + BF + MAGSAC++'
+
+
+def _bench_frames(frames: list, scale: int) -> list[BenchFrame]:
+    out = []
+    for f in frames:
+        left, right, h = f.left, f.right, f.homography
+        if scale != 1:
+            size = (left.shape[1] * scale, left.shape[0] * scale)
+            left = cv2.resize(left, size, interpolation=cv2.INTER_CUBIC)
+            right = cv2.resize(right, size, interpolation=cv2.INTER_CUBIC)
+            s = np.diag([scale, scale, 1.0])
+            # Upscaling maps pixel centre x to scale x + (scale - 1) / 2.
+            shift = np.array([[1.0, 0, (scale - 1) / 2], [0, 1.0, (scale - 1) / 2], [0, 0, 1]])
+            to_big = shift @ s
+            h = to_big @ h @ np.linalg.inv(to_big)
+            floor = apply_homography(to_big, every_floor_pixel(f, 37))
+        else:
+            floor = every_floor_pixel(f, 37)
+        out.append(BenchFrame(mono8_message(left), mono8_message(right), h, floor))
+    return out
+
+
+@functools.lru_cache(maxsize=4)
+def _rendered(n_frames: int, seed: int, width: int, height: int) -> list:
+    return scene_sequence(n_frames, seed, width=width, height=height, floor='random')
+
+
+def sequence(width: int, height: int, n_frames: int, seed: int) -> tuple[list[BenchFrame], Any]:
+    """Return a rendered moving sequence at ``width`` x ``height`` and its camera set-up."""
+    scale = max(1, int(round(width / _RENDER_LIMIT[0])))
+    frames = _rendered(n_frames, seed, width // scale, height // scale)
+    return _bench_frames(frames, scale), frames[0].setup
+
+
+def orb_pair(orb: Any, matcher: Any, left_msg: Any, right_msg: Any) -> np.ndarray | None:
+    """Return the baseline's homography for one pair of messages (decode included)."""
     left = message_to_gray(left_msg)
     right = message_to_gray(right_msg)
     kl, dl = orb.detectAndCompute(left, None)
@@ -46,56 +124,140 @@ def _orb_pipeline(orb, matcher, left_msg, right_msg) -> np.ndarray | None:
     return h
 
 
-def _error(h: np.ndarray | None, frame) -> float:
-    """Return the transfer error over every 37th visible floor pixel (inf without H)."""
-    return transfer_error_px(h, frame, every_floor_pixel(frame, 37))
+def _orb() -> tuple[Any, Any]:
+    return cv2.ORB_create(nfeatures=1000), cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True)
 
 
-def bench_latency(width: int, height: int, n_frames: int, seed: int) -> None:
-    """Print full-pipeline latency (warm) and the ORB + MAGSAC baseline for one size."""
-    frames = scene_sequence(n_frames, seed, width=width, height=height, floor='random')
-    msgs = [(mono8_message(f.left), mono8_message(f.right)) for f in frames]
-    config = PlaneNodeConfig(prior=prior_around(frames[0].setup))
+def _timed(call: Callable[[], Any]) -> tuple[Any, float]:
+    t = time.perf_counter()
+    out = call()
+    return out, time.perf_counter() - t
+
+
+def bench_warm(width: int, height: int, n_frames: int, seed: int,
+               config: PlaneNodeConfig | None = None) -> list[Row]:
+    """Return the warm rows of one size: the whole pair, the tracker and the mask."""
+    frames, setup = sequence(width, height, n_frames, seed)
+    config = config or PlaneNodeConfig(prior=prior_around(setup))
     pipeline = PlanePipeline(config)
-    ours, ours_err = [], []
-    for i, (lm, rm) in enumerate(msgs):
-        t = time.perf_counter()
-        result = pipeline.process(message_to_gray(lm), message_to_gray(rm), i * 33_000_000)
-        elapsed = time.perf_counter() - t
-        if i > 0:  # the first pair is the cold start
-            ours.append(elapsed)
-            ours_err.append(_error(result.homography, frames[i]))
-    # The bad-input checks alone (part of the pipeline's time): size, frozen camera, clipping.
-    checks = PairChecks()
-    check_times = []
-    for i, (lm, rm) in enumerate(msgs):
-        left, right = message_to_gray(lm), message_to_gray(rm)
-        t = time.perf_counter()
-        checks.check(left, right, i * 33_000_000, config.pipeline)
-        check_times.append(time.perf_counter() - t)
-    orb = cv2.ORB_create(nfeatures=1000)
-    matcher = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True)
-    base, base_err = [], []
-    for i, (lm, rm) in enumerate(msgs[1:], start=1):
-        t = time.perf_counter()
-        h = _orb_pipeline(orb, matcher, lm, rm)
-        base.append(time.perf_counter() - t)
-        base_err.append(_error(h, frames[i]))
-
-    def row(name, times, errs=None):
-        ms = 1e3 * np.asarray(times)
-        line = f'{width}x{height:<5d} {name:28s} {np.median(ms):8.2f} {np.percentile(ms, 95):8.2f}'
-        if errs is not None:
-            errs = np.asarray(errs)
-            line += f'   {np.median(errs):8.3f} {100 * np.mean(errs < 1.0):6.1f} %'
-        print(line)
-
-    row('domplane (warm, full)', ours, ours_err)
-    row('  of which input checks', check_times[1:])
-    row('ORB + BF + MAGSAC baseline', base, base_err)
+    orb, matcher = _orb()
+    size = f'{width}x{height}'
+    whole = Row(f'warm {size}')
+    tracker = Row(f'  of which tracker {size}', base_name='')
+    mask = Row(f'  of which mask {size}', base_name='')
+    for i, frame in enumerate(frames):
+        result, ours = _timed(lambda: pipeline.process(
+            message_to_gray(frame.left), message_to_gray(frame.right), i * 33_000_000))
+        h, base = _timed(lambda: orb_pair(orb, matcher, frame.left, frame.right))
+        if i == 0:  # the first pair is the cold start
+            continue
+        whole.ours.append(ours)
+        whole.base.append(base)
+        whole.ours_err.append(frame.error(result.homography))
+        whole.base_err.append(frame.error(h))
+        tracker.ours.append(1e-3 * result.timings_ms['tracking'])
+        mask.ours.append(1e-3 * result.timings_ms['mask'])
+    level = config.features.max_width
+    whole.note = f'features.max_width {level}'
+    return [whole, tracker, mask]
 
 
-def _plane_node(prior: PriorConfig) -> Any:
+def bench_cold(n_pairs: int, seed: int) -> Row:
+    """Return the cold-start row: a fresh pipeline per rendered 640x480 pair."""
+    orb, matcher = _orb()
+    row = Row('cold 640x480 (first pair)')
+    published = correct = 0
+    for k in range(n_pairs):
+        scene = random_scene(seed + k, floor='random')
+        frame = _bench_frames([scene], 1)[0]
+        pipeline = PlanePipeline(PlaneNodeConfig(prior=prior_around(scene.setup)))
+        result, ours = _timed(lambda: pipeline.process(
+            message_to_gray(frame.left), message_to_gray(frame.right), 0))
+        h, base = _timed(lambda: orb_pair(orb, matcher, frame.left, frame.right))
+        row.ours.append(ours)
+        row.base.append(base)
+        err = frame.error(result.homography)
+        row.ours_err.append(err)
+        row.base_err.append(frame.error(h))
+        published += result.homography is not None
+        correct += err < 1.0
+    precision = correct / published if published else float('nan')
+    row.note = (f'published on the first pair {published}/{n_pairs}, correct (< 1 px) '
+                f'{correct}/{n_pairs}, precision {precision:.2f}')
+    return row
+
+
+def bench_lines(n_frames: int, seed: int) -> Row:
+    """Return the lines row: warm 640x480 with ``features.kind`` both beside points."""
+    frames, setup = sequence(640, 480, n_frames, seed)
+    base_config = PlaneNodeConfig(prior=prior_around(setup))
+    both_config = replace(base_config, features=replace(base_config.features, kind='both'))
+    points, both = PlanePipeline(base_config), PlanePipeline(both_config)
+    row = Row('warm 640x480 kind both', base_name='points only')
+    for i, frame in enumerate(frames):
+        left, right = message_to_gray(frame.left), message_to_gray(frame.right)
+        res_both, t_both = _timed(lambda: both.process(left, right, i * 33_000_000))
+        res_pts, t_pts = _timed(lambda: points.process(left, right, i * 33_000_000))
+        if i:
+            row.ours.append(t_both)
+            row.base.append(t_pts)
+            row.ours_err.append(frame.error(res_both.homography))
+            row.base_err.append(frame.error(res_pts.homography))
+    return row
+
+
+def _stats(times: list[float]) -> tuple[float, float]:
+    ms = 1e3 * np.asarray(times)
+    return float(np.median(ms)), float(np.percentile(ms, 95))
+
+
+def _err(errs: list[float]) -> str:
+    if not errs:
+        return ''
+    e = np.asarray(errs)
+    return f'{np.median(e):7.3f} {100 * np.mean(e < 1.0):5.0f} %'
+
+
+def print_row(row: Row) -> None:
+    """Print one row: ours, the baseline, the ratio baseline / ours of the medians."""
+    med, p95 = _stats(row.ours)
+    line = f'{row.name:32s} {med:8.2f} {p95:8.2f} {_err(row.ours_err):>15s}'
+    if row.base:
+        bmed, bp95 = _stats(row.base)
+        line += (f'   {row.base_name:20s} {bmed:8.2f} {bp95:8.2f} {_err(row.base_err):>15s}'
+                 f'   x{bmed / med:5.2f}')
+    print(line + (f'   {row.note}' if row.note else ''))
+
+
+def bar_chart(rows: list[Row], path: Path, title: str) -> None:
+    """Write a horizontal bar chart of the rows' medians (p95 as whiskers) to ``path``."""
+    import matplotlib
+    matplotlib.use('Agg')
+    from matplotlib import pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(10, 0.55 * len(rows) + 1.5))
+    y = np.arange(len(rows))
+    ours = np.array([_stats(r.ours) for r in rows])
+    base = np.array([_stats(r.base) if r.base else (np.nan, np.nan) for r in rows])
+    ax.barh(y - 0.2, ours[:, 0], 0.4, xerr=[np.zeros(len(rows)), ours[:, 1] - ours[:, 0]],
+            label='domplane_ros', color='tab:blue')
+    ax.barh(y + 0.2, base[:, 0], 0.4, xerr=[np.zeros(len(rows)), base[:, 1] - base[:, 0]],
+            label='baseline (ORB + BF + MAGSAC++; for kind both: points only)',
+            color='tab:orange')
+    ax.set_yticks(y, [r.name.strip() for r in rows])
+    ax.invert_yaxis()
+    ax.set_xscale('log')
+    ax.set_xlabel('ms per pair, one core (bar: median, whisker: p95; log scale)')
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc='upper center', bbox_to_anchor=(0.5, -0.12), ncol=2, fontsize=8)
+    ax.grid(axis='x', which='both', alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def _plane_node(prior: PriorConfig, features: FeatureConfig) -> Any:
     """Return a live plane_node with ``prior``, in this process (rclpy initialised)."""
     from rclpy.parameter import Parameter
 
@@ -105,7 +267,8 @@ def _plane_node(prior: PriorConfig) -> Any:
         Parameter('prior.focal_px', value=list(prior.focal_px)),
         Parameter('prior.baseline_over_height', value=list(prior.baseline_over_height)),
         Parameter('prior.tilt_deg', value=list(prior.tilt_deg)),
-        Parameter('prior.vergence_deg', value=list(prior.vergence_deg))])
+        Parameter('prior.vergence_deg', value=list(prior.vergence_deg)),
+        Parameter('features.max_width', value=features.max_width)])
 
 
 def _spin_until(executor: Any, done: Callable[[], bool], timeout_s: float,
@@ -116,8 +279,8 @@ def _spin_until(executor: Any, done: Callable[[], bool], timeout_s: float,
         executor.spin_once(timeout_sec=step_s)
 
 
-def bench_dds(seconds: float, rate_hz: float) -> None:
-    """Print image-stamp-to-mask-arrival latency through DDS with a 30 Hz publisher."""
+def bench_dds(seconds: float, rate_hz: float, width: int, height: int) -> None:
+    """Print image-stamp-to-mask-arrival latency through DDS with a ``rate_hz`` publisher."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import qos_profile_sensor_data
@@ -125,9 +288,10 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
 
     from domplane_ros.ros.messages import image_msg, stamped_header
 
-    frames = scene_sequence(30, 11, width=640, height=480, floor='random')
+    frames, setup = sequence(width, height, 10, 11)
+    images = [(message_to_gray(f.left), message_to_gray(f.right)) for f in frames]
     rclpy.init()
-    node = _plane_node(prior_around(frames[0].setup))
+    node = _plane_node(prior_around(setup), FeatureConfig())
     driver = rclpy.create_node('bench_driver')
     pubs = [driver.create_publisher(Image, f'{side}/image_raw', qos_profile_sensor_data)
             for side in ('left', 'right')]
@@ -137,9 +301,9 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
         time.time() - (msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec)), 50)
 
     def tick() -> None:
-        frame = frames[sent[0] % len(frames)]
+        pair = images[sent[0] % len(images)]
         now_ns = time.time_ns()
-        for pub, gray, side in zip(pubs, (frame.left, frame.right), ('left', 'right')):
+        for pub, gray, side in zip(pubs, pair, ('left', 'right')):
             pub.publish(image_msg(gray, stamped_header(now_ns, side), 'mono8'))
         sent[0] += 1
 
@@ -148,7 +312,7 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
     executor.add_node(driver)
     _spin_until(executor, lambda: pubs[0].get_subscription_count() > 0, 3.0, 0.05)
     driver.create_timer(1.0 / rate_hz, tick)
-    _spin_until(executor, lambda: False, seconds, 0.01)
+    _spin_until(executor, lambda: False, seconds, 0.005)
     processed = node.session.counters.processed
     busy = node.slot.dropped
     executor.shutdown()
@@ -156,28 +320,45 @@ def bench_dds(seconds: float, rate_hz: float) -> None:
     driver.destroy_node()
     rclpy.shutdown()
     lat = 1e3 * np.asarray(latencies[5:] or [float('nan')])
-    print(f'\nDDS end to end, 640x480 mono8 at {rate_hz:g} Hz for {seconds:g} s: sent {sent[0]} '
-          f'pairs, masks received {len(latencies)}, processed {processed}, dropped while busy '
-          f'{busy}')
-    print(f'stamp -> mask arrival latency: median {np.median(lat):.2f} ms, '
-          f'p95 {np.percentile(lat, 95):.2f} ms')
+    print(f'DDS end to end, {width}x{height} mono8 at {rate_hz:g} Hz for {seconds:g} s: sent '
+          f'{sent[0]} pairs, masks received {len(latencies)}, processed {processed}, dropped '
+          f'while busy {busy}; stamp -> mask arrival: median {np.median(lat):.1f} ms, '
+          f'p95 {np.percentile(lat, 95):.1f} ms')
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the pipeline benchmark and print its figures."""
+    """Run the pipeline benchmark, print its rows and write the bar chart."""
     parser = tool_parser(__doc__)
-    parser.add_argument('--frames', type=int, default=60, help='frames per image size')
+    parser.add_argument('--frames', type=int, default=30, help='frames per warm sequence')
+    parser.add_argument('--cold-pairs', type=int, default=10, help='rendered cold-start pairs')
+    parser.add_argument('--sizes', default='640x480,1280x720,3840x2160',
+                        help='comma-separated warm sizes WxH')
     parser.add_argument('--dds-seconds', type=float, default=10.0)
     parser.add_argument('--no-dds', action='store_true', help='skip the DDS measurement')
+    add_output_argument(parser, 'bench_output', 'the bar chart')
     args = parser.parse_args(argv)
-    print(f'machine: {machine_name()}')
-    print(f'{"size":11s} {"pipeline":28s} {"med ms":>8s} {"p95 ms":>8s}   '
-          f'{"med err":>8s} {"<1 px":>8s}')
+    machine = machine_name()
+    print(f'machine: {machine}')
+    print(f'{"row (domplane_ros)":32s} {"med ms":>8s} {"p95 ms":>8s} {"err px  <1px":>15s}   '
+          f'{"baseline":20s} {"med ms":>8s} {"p95 ms":>8s} {"err px  <1px":>15s}   ratio')
+    rows: list[Row] = []
     with one_core():
-        bench_latency(640, 480, args.frames, seed=5)
-        bench_latency(1280, 720, args.frames, seed=5)
+        for size in args.sizes.split(','):
+            width, height = (int(v) for v in size.lower().split('x'))
+            for row in bench_warm(width, height, args.frames, seed=5):
+                print_row(row)
+                rows.append(row)
+        for row in (bench_cold(args.cold_pairs, seed=100), bench_lines(args.frames, seed=5)):
+            print_row(row)
+            rows.append(row)
+        chart = args.out / 'bench_pipeline.png'
+        bar_chart(rows, chart, machine)
+        print(f'bar chart: {chart}')
         if not args.no_dds:
-            bench_dds(args.dds_seconds, 30.0)
+            for size in args.sizes.split(','):
+                width, height = (int(v) for v in size.lower().split('x'))
+                if width in (640, 3840):
+                    bench_dds(args.dds_seconds, 30.0, width, height)
     return 0
 
 
