@@ -3,7 +3,7 @@
 Every tunable lives in one table, :data:`~domplane_ros.parameters.PARAMETERS` (re-exported
 here with its validator and generators). The node declares its ROS parameters
 from it (with descriptions and ranges), the replay reads the same YAML block through
-:meth:`PlaneNodeConfig.from_ros_params`, and the README's parameter table is generated from
+:meth:`PlaneNodeConfig.from_ros_params`, and the table of docs/PARAMETERS.md is generated from
 it, so there is one set of defaults and one validator.
 
 Each part of the pipeline gets a frozen dataclass that validates itself in ``__post_init__``,

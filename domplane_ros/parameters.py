@@ -2,7 +2,7 @@
 
 :data:`PARAMETERS` is the one table the node declares its ROS parameters from (descriptors
 with ranges), the config dataclasses of :mod:`domplane_ros.config` validate against, and the
-README's parameter table and the default params file are generated from.
+parameter table of docs/PARAMETERS.md and the default params file are generated from.
 """
 
 from __future__ import annotations
@@ -479,7 +479,7 @@ def _yaml_float(value: float) -> str:
 
 
 def parameters_markdown() -> str:
-    """Return the README's parameter table."""
+    """Return the parameter table of docs/PARAMETERS.md (markdown)."""
     rows = ['| parameter | default | range | description |', '|---|---|---|---|']
     for spec in PARAMETERS:
         if spec.choices:

@@ -250,15 +250,19 @@ class BagInput:
             topics = {name: info.msgtype for name, info in self._reader.topics.items()}
             image_topics = sorted(name for name, msgtype in topics.items()
                                   if msgtype in IMAGE_TYPES)
-            listing = ', '.join(f'{name} ({topics[name].rsplit("/", 1)[-1]})'
-                                for name in image_topics) or 'none'
+            # Names from the bag are clipped, and at most 10 listed: a bag may hold anything.
+            listing = ', '.join(f'{clip_text(name, 80)} ({topics[name].rsplit("/", 1)[-1]})'
+                                for name in image_topics[:10]) or 'none'
+            if len(image_topics) > 10:
+                listing += f' and {len(image_topics) - 10} more'
             self.sides: dict[str, Side] = {}
             for side, topic in (('left', left_topic), ('right', right_topic)):
                 if topic not in topics:
                     raise BagError(f'{side} topic {topic!r} is not in bag {str(self.path)!r}; '
                                    f'image topics in the bag: {listing}')
                 if topics[topic] not in IMAGE_TYPES:
-                    raise BagError(f'{side} topic {topic!r} has type {topics[topic]}, not '
+                    raise BagError(f'{side} topic {topic!r} has type '
+                                   f'{clip_text(topics[topic], 80)}, not '
                                    f'{IMAGE_TYPE} or {COMPRESSED_IMAGE_TYPE}; image topics '
                                    f'in the bag: {listing}')
                 self.sides[topic] = side

@@ -32,7 +32,7 @@ from domplane_ros.ros.usage import usage, wants_help
 from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.stream.session import ProcessedPair, SIDES, StreamSession
-from domplane_ros.stream.status import format_number, JOINT_SPEED_KEY, STATUS_NAME
+from domplane_ros.stream.status import format_number, STATUS_NAME
 from domplane_ros.stream.sync import Pair
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -283,6 +283,7 @@ class PlaneNode(Node):
                              'ignored', key='implausible joint speed')
             return
         self._joint_speed = (speed, now)
+        self._implausible_joint = None   # the latest message is plausible again
 
     def joint_speed(self) -> float | None:
         """Return the head's latest largest joint speed in rad/s, or None if none is recent.
@@ -294,18 +295,12 @@ class PlaneNode(Node):
             return None
         return latest[0]
 
-    def _joint_values(self, values: list[tuple[str, str]]) -> list[tuple[str, str]]:
-        """Flag a recent implausible joint speed in the status values; add its count.
-
-        Without a joint topic the values stay the session's, as the replay writes them.
-        """
-        if self._joint_sub is None:
-            return values
+    def implausible_joint_speed(self) -> float | None:
+        """Return a recent joint speed above ``head.max_joint_velocity`` (rad/s), or None."""
         flagged = self._implausible_joint
-        if flagged is not None and time.monotonic() - flagged[1] <= self.config.head.max_age_s:
-            text = f'implausible: {format_number(flagged[0], 3)} (ignored)'
-            values = [(key, text if key == JOINT_SPEED_KEY else value) for key, value in values]
-        return values + [('joint states implausible', str(self.implausible_joint_states))]
+        if flagged is None or time.monotonic() - flagged[1] > self.config.head.max_age_s:
+            return None
+        return flagged[0]
 
     # --- Processing ----------------------------------------------------------------------
     def _work(self) -> None:
@@ -366,7 +361,11 @@ class PlaneNode(Node):
     def publish_diagnostics(self) -> None:
         """Publish the status now (the diagnostics timer's callback); a new period starts."""
         level, message, values = self.session.status(
-            time.monotonic(), dropped_busy=self.slot.dropped, joint_speed=self.joint_speed())
+            time.monotonic(), dropped_busy=self.slot.dropped, joint_speed=self.joint_speed(),
+            implausible_joint_speed=self.implausible_joint_speed(),
+            # Counted only with a joint topic: without one the keys stay the replay's.
+            implausible_joint_states=(self.implausible_joint_states
+                                      if self._joint_sub is not None else None))
         if message.startswith('no images on '):
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in self.session.last_cameras)
@@ -379,7 +378,7 @@ class PlaneNode(Node):
                 throttle_duration_sec=60.0)
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
-            level, message, self._joint_values(values)))
+            level, message, values))
 
     def stop_worker(self) -> None:
         """Stop the worker thread; pairs then wait in :attr:`slot` (see process_pending)."""

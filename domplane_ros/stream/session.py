@@ -314,7 +314,9 @@ class StreamSession:
         self.last_error = clip_text(error, LAST_ERROR_CHARS)
 
     def status(self, now: float, rate: float | None = None, dropped_busy: int = 0,
-               joint_speed: float | None = None) -> tuple[int, str, list[tuple[str, str]]]:
+               joint_speed: float | None = None, implausible_joint_speed: float | None = None,
+               implausible_joint_states: int | None = None
+               ) -> tuple[int, str, list[tuple[str, str]]]:
         """Return the ``/diagnostics`` status and start a new period.
 
         Args:
@@ -323,6 +325,9 @@ class StreamSession:
                 pairs made since the last status, over the time since then).
             dropped_busy: Pairs the adapter replaced before its worker took them.
             joint_speed: The head's largest joint speed in rad/s, or None.
+            implausible_joint_speed: A recent implausible joint speed (rad/s), or None.
+            implausible_joint_states: Joint states flagged implausible so far (None: no
+                joint input, no key).
 
         Returns:
             ``(level, message, values)``, see :func:`plane_status`.
@@ -342,4 +347,5 @@ class StreamSession:
             consecutive_failures=counters.consecutive_failures, last_result=self.last_result,
             last_error=self.last_error, input_counts=(self.counts,), input_warning=warning,
             cameras=cameras, silence_s=self.config.transport.silence_s,
-            joint_speed=joint_speed)
+            joint_speed=joint_speed, implausible_joint_speed=implausible_joint_speed,
+            implausible_joint_states=implausible_joint_states)

@@ -22,7 +22,9 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
                  reinitialisations: int, consecutive_failures: int, last_result: Any,
                  last_error: str, input_counts: Sequence[Mapping[str, int]] = (),
                  input_warning: str = '', cameras: Sequence[tuple[str, int, float, float]] = (),
-                 silence_s: float = math.inf, joint_speed: float | None = None
+                 silence_s: float = math.inf, joint_speed: float | None = None,
+                 implausible_joint_speed: float | None = None,
+                 implausible_joint_states: int | None = None
                  ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
@@ -48,6 +50,11 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
             header-stamp time in the replay.
         silence_s: A camera silent for longer than this makes the status WARN, naming it.
         joint_speed: The head's largest joint speed in rad/s, or None without joint input.
+        implausible_joint_speed: A recent joint speed above ``head.max_joint_velocity``
+            (rad/s), ignored as a hint; shown instead of the joint speed.
+        implausible_joint_states: Joint states with such a speed so far, or None without
+            joint input (then the key ``joint states implausible`` is left out, as the
+            replay, which has no joint input, leaves it out).
 
     Returns:
         ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
@@ -70,7 +77,9 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('dropped frames (sync)', dropped_sync),
         ('decode errors', decode_errors),
         ('lock state', lock_state),
-        *_result_values(last_result, joint_speed),
+        *_result_values(last_result, joint_speed, implausible_joint_speed),
+        *([('joint states implausible', implausible_joint_states)]
+          if implausible_joint_states is not None else []),
         ('re-initialisations', reinitialisations),
         ('last error', last_error or 'none'),
     ]
@@ -136,7 +145,14 @@ def _latency_values(latencies_ms: Sequence[float]) -> list[tuple[str, str]]:
             ('processing latency p95 [ms]', format_number(np.percentile(lat, 95)))]
 
 
-def _result_values(result: Any, joint_speed: float | None) -> list[tuple[str, Any]]:
+def _joint_speed_text(speed: float | None, implausible: float | None) -> str:
+    if implausible is not None:
+        return f'implausible: {format_number(implausible, 3)} (ignored)'
+    return 'n/a' if speed is None else format_number(speed, 3)
+
+
+def _result_values(result: Any, joint_speed: float | None,
+                   implausible_joint_speed: float | None = None) -> list[tuple[str, Any]]:
     """Return the last result's keys, from 'warm start' to 'converged'.
 
     'plane confidence' is the published plane's verification confidence in [0, 1] (0.5 at
@@ -147,7 +163,7 @@ def _result_values(result: Any, joint_speed: float | None) -> list[tuple[str, An
         ('warm start', (result.warm_start or 'none') if result is not None else 'none'),
         ('plane confidence', f'{result.confidence:.2f}' if ok else '0.00'),
         ('prior candidates (last frame)', result.candidates if result is not None else 0),
-        (JOINT_SPEED_KEY, 'n/a' if joint_speed is None else format_number(joint_speed, 3)),
+        (JOINT_SPEED_KEY, _joint_speed_text(joint_speed, implausible_joint_speed)),
         ('inliers', result.n_inliers if result is not None else 0),
         ('final energy', f'{result.estimate.final_energy:.4g}' if ok else 'n/a'),
         ('converged', bool(ok and result.estimate.converged)),

@@ -12,6 +12,7 @@ import contextlib
 import io
 import os
 from pathlib import Path
+import re
 import resource
 import shutil
 import signal
@@ -204,3 +205,17 @@ def test_output_inside_the_folder_of_a_storage_file_input_is_refused(tmp_path, b
     code, _, err, _ = _run([alone, tmp_path / 'beside'])
     assert code == 0, err
     assert read_bag(tmp_path / 'beside')['counts']['/plane/mask'] == 3
+
+
+def test_long_topic_names_from_a_bag_are_clipped_in_the_refusal(tmp_path, frames):
+    bag, long_topic = tmp_path / 'in', '/' + 'x' * 5000
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        for k in range(12):
+            writer.add_connection(f'{long_topic}{k}', 'sensor_msgs/msg/Image', typestore=TS)
+    code, _, err, _ = _run([bag, tmp_path / 'out'])
+    line = _one_error_line(err)
+    assert code == EXIT_REFUSED and "left topic '/left/image_raw' is not in bag" in line
+    # Sorted: /x..x0, /x..x1, /x..x10, /x..x11, /x..x2, ...: 5002 or 5003 characters each.
+    assert len(re.findall(r'\.\.\. \(500[23] characters\) \(Image\)', line)) == 10
+    assert line.endswith(' and 2 more')
+    assert len(line) < 1500, len(line)
