@@ -19,7 +19,7 @@ from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.homography import as_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.lines import detect_lines
-from domplane_ros.core.mask import plane_mask
+from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import camera_motion, predict_plane_homography
@@ -187,7 +187,7 @@ class PlanePipeline:
         t2 = time.perf_counter()
         step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
         t3 = time.perf_counter()
-        estimate, h, mask = self._publish(step, left, right, feats)
+        estimate, h, mask, parallax = self._publish(step, left, right, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
             self.counts.add('too_few_features')
@@ -196,7 +196,8 @@ class PlanePipeline:
             self._previous = _Previous(left.copy(), right.copy(), *track_pts)
         t4 = time.perf_counter()
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
-                           estimate=estimate, left_points=feats.left_points,
+                           parallax=parallax, estimate=estimate,
+                           left_points=feats.left_points,
                            right_points=feats.right_points, reinitialised=step.reinitialised,
                            reason=reason, state=self._state,
                            timings_ms=_timings_ms(t0, t1, t2, t3, t4),
@@ -220,12 +221,15 @@ class PlanePipeline:
         return step
 
     def _publish(self, step: _Step, left: np.ndarray, right: np.ndarray, feats: Features
-                 ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray]:
-        """Return the frame's estimate, homography and mask; keep an accepted plane."""
+                 ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray,
+                            np.ndarray | None]:
+        """Return the frame's estimate, homography, mask and parallax; keep a plane."""
         estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
+        parallax = None
         if step.accepted:
             h = estimate.homography
-            mask = plane_mask(left, right, h, self.config.mask)
+            out = parallax_mask(left, right, h, self.config.mask, self.config.prior.focal_px)
+            mask, parallax = out.labels, out.parallax
             self._last_h = h
             self._last_energy_per_point = estimate.final_energy / max(feats.n_left, 1)
             self.stats.succeeded += 1
@@ -233,7 +237,7 @@ class PlanePipeline:
             h = None
             mask = np.zeros(left.shape, np.uint8)
             self.stats.failed += 1
-        return estimate, h, mask
+        return estimate, h, mask, parallax
 
     def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
                  warnings: tuple[str, ...], t0: float, fast: bool) -> FrameResult:
