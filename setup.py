@@ -15,10 +15,12 @@ setup(
         ('share/' + PACKAGE_NAME, ['package.xml']),
         ('share/' + PACKAGE_NAME + '/config',
          sorted(glob('config/*.yaml') + glob('config/*.xml'))),
+        ('share/' + PACKAGE_NAME + '/launch', sorted(glob('launch/*.launch.py'))),
         # `ros2 run` looks for executables in <prefix>/lib/<package>/. These launchers are
         # data files, so pip (wheel and editable) and colcon both install them there; the console
         # scripts below stay in <prefix>/bin. See the comment in setup.cfg.
-        ('lib/' + PACKAGE_NAME, ['scripts/plane_node', 'scripts/plane_replay']),
+        ('lib/' + PACKAGE_NAME,
+         ['scripts/plane_node', 'scripts/plane_replay', 'scripts/plane_pair']),
     ],
     # colcon does not install install_requires; runtime dependencies are rosdep keys in
     # package.xml and pip requirements in requirements.txt.
@@ -35,6 +37,7 @@ setup(
         'console_scripts': [
             'plane_node = domplane_ros.ros.node:main',
             'plane_replay = domplane_ros.replay.cli:main',
+            'plane_pair = domplane_ros.pair.cli:main',
         ],
     },
 )

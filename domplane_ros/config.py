@@ -18,7 +18,8 @@ from typing import Any, ClassVar, Mapping
 from domplane_ros.errors import ConfigError
 from domplane_ros.parameters import (check_value, default_params_yaml, FEATURE_KINDS,
                                      flatten_params, PARAMETERS, PARAMETERS_BY_NAME,
-                                     parameters_markdown, ParamSpec, POTENTIAL_NAMES)
+                                     parameters_markdown, ParamSpec, POTENTIAL_NAMES,
+                                     unknown_parameter_message)
 
 __all__ = [
     'ConfigError', 'EstimatorConfig', 'FEATURE_KINDS', 'FeatureConfig', 'HeadConfig',
@@ -26,6 +27,7 @@ __all__ = [
     'PlaneNodeConfig', 'POTENTIAL_NAMES', 'PriorConfig', 'SyncConfig', 'TrackingConfig',
     'TransportConfig', 'VerificationSettings', 'check_value', 'default_params_yaml',
     'flatten_params', 'load_params_file', 'one_shot_search', 'parameters_markdown',
+    'unknown_parameter_message',
 ]
 
 
@@ -94,6 +96,7 @@ class PriorConfig(_Section):
     baseline_over_height: tuple[float, float] = (0.05, 0.4)
     tilt_deg: tuple[float, float] = (10.0, 50.0)
     vergence_deg: tuple[float, float] = (-2.0, 4.0)
+    principal_point_px: tuple[float, ...] = ()
     samples: int = 5
     refine_best: int = 6
     screen_threshold_px: float = 12.0
@@ -169,6 +172,7 @@ class HeadConfig(_Section):
 
     joint_states_topic: str = ''
     max_age_s: float = 0.5
+    max_joint_velocity: float = 20.0
 
 
 @dataclass(frozen=True)
@@ -183,19 +187,35 @@ class SyncConfig(_Section):
 
 @dataclass(frozen=True)
 class TransportConfig:
-    """QoS and diagnostics settings of the node (``qos.*``, ``diagnostics.*``)."""
+    """Input and diagnostics settings of the node.
+
+    ``qos.*``, ``diagnostics.*``, ``image_transport`` and ``camera_info.*``; the replay
+    ignores them.
+    """
 
     reliable: bool = False
     depth: int = 2
     diagnostics_period_s: float = 1.0
     silence_s: float = 1.0
+    image_transport: str = 'raw'
+    camera_info_topic: str = ''
+    camera_info_focal_tolerance: float = 0.1
+
+    _NAMES: ClassVar[dict[str, str]] = {
+        'reliable': 'qos.reliable', 'depth': 'qos.depth',
+        'diagnostics_period_s': 'diagnostics.period_s', 'silence_s': 'diagnostics.silence_s',
+        'image_transport': 'image_transport', 'camera_info_topic': 'camera_info.topic',
+        'camera_info_focal_tolerance': 'camera_info.focal_tolerance'}
 
     def __post_init__(self) -> None:
         """Validate every field against :data:`PARAMETERS`."""
-        check_value(PARAMETERS_BY_NAME['qos.reliable'], self.reliable)
-        check_value(PARAMETERS_BY_NAME['qos.depth'], self.depth)
-        check_value(PARAMETERS_BY_NAME['diagnostics.period_s'], self.diagnostics_period_s)
-        check_value(PARAMETERS_BY_NAME['diagnostics.silence_s'], self.silence_s)
+        for attribute, name in self._NAMES.items():
+            check_value(PARAMETERS_BY_NAME[name], getattr(self, attribute))
+
+    @classmethod
+    def from_flat(cls, values: Mapping[str, Any]) -> TransportConfig:
+        """Build the settings from a flat mapping of dotted names to checked values."""
+        return cls(**{attribute: values[name] for attribute, name in cls._NAMES.items()})
 
 
 def _validate_section(obj: Any, section: str) -> None:
@@ -250,7 +270,7 @@ class PlaneNodeConfig:
         flat = flatten_params(params)
         unknown = sorted(set(flat) - set(PARAMETERS_BY_NAME))
         if unknown:
-            raise ConfigError(f'unknown parameter {unknown[0]!r}'
+            raise ConfigError(unknown_parameter_message(unknown[0])
                               + (f' (and {len(unknown) - 1} more)' if len(unknown) > 1 else ''))
         values = {spec.name: spec.default for spec in PARAMETERS}
         for name, value in flat.items():
@@ -289,10 +309,7 @@ class PlaneNodeConfig:
             tracking=TrackingConfig(**section('tracking')),
             head=HeadConfig(**section('head')),
             sync=SyncConfig(**section('sync')),
-            transport=TransportConfig(
-                reliable=values['qos.reliable'], depth=values['qos.depth'],
-                diagnostics_period_s=values['diagnostics.period_s'],
-                silence_s=values['diagnostics.silence_s']),
+            transport=TransportConfig.from_flat(values),
             initial_homography=tuple(values['initial_homography']),
         )
 
@@ -309,36 +326,25 @@ def one_shot_search(config: PlaneNodeConfig) -> PlaneNodeConfig:
 
 
 def load_params_file(path: str, node_name: str = 'plane_node') -> PlaneNodeConfig:
-    """Read a ROS 2 parameters YAML file and validate the node's block.
+    """Read a ROS 2 parameters YAML file through the guarded reader and validate it.
 
-    Accepts ``plane_node: ros__parameters:``, ``/plane_node: ...`` and ``/**: ...`` blocks.
+    Accepts ``plane_node: ros__parameters:``, ``/plane_node: ...`` and ``/**: ...`` blocks
+    (merged, wildcards first); see :mod:`domplane_ros.params_file` for every check (size,
+    aliases, structure) made before the file is used.
 
     Args:
         path: Path to the YAML file.
-        node_name: The node whose block is read.
+        node_name: The node whose blocks are read.
 
     Returns:
         The validated configuration.
 
     Raises:
-        ConfigError: If the file cannot be read or parsed, has no block for the node, or
-            holds an invalid parameter.
+        ConfigError: If the file cannot be read or parsed, is too large, uses an alias, is
+            not shaped as a parameters file, has no block for the node, or holds an invalid
+            parameter; the message is one line and names the problem.
 
     """
-    import yaml
+    from domplane_ros.params_file import read_node_params
 
-    try:
-        with open(path, encoding='utf-8') as stream:
-            document = yaml.safe_load(stream)
-    except OSError as err:
-        raise ConfigError(f'cannot read params file {path!r}: {err.strerror}') from err
-    except yaml.YAMLError as err:
-        raise ConfigError(f'params file {path!r} is not valid YAML: {err}') from err
-    if not isinstance(document, Mapping):
-        raise ConfigError(f'params file {path!r} holds no parameter blocks')
-    for key in (node_name, '/' + node_name, '/**'):
-        block = document.get(key)
-        if isinstance(block, Mapping) and 'ros__parameters' in block:
-            return PlaneNodeConfig.from_ros_params(block['ros__parameters'] or {})
-    raise ConfigError(
-        f'params file {path!r} has no "{node_name}: ros__parameters:" block')
+    return PlaneNodeConfig.from_ros_params(read_node_params(path, node_name))

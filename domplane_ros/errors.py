@@ -41,3 +41,33 @@ class ConfigError(DomplaneError, ValueError):
 
 class BagError(DomplaneError):
     """A rosbag2 file could not be read, or lacks the requested topics."""
+
+
+def clip_text(text: str, limit: int = 80) -> str:
+    """Return ``text`` cut to ``limit`` characters, saying how long it was if it was cut.
+
+    For strings from the wire (an image's encoding, a joint's name) and from files, before
+    they reach a log line, an error message or ``/diagnostics``: a 10 KB encoding name
+    becomes ``'xxxx...' (10240 characters)`` instead of filling the log.
+
+    Args:
+        text: The string.
+        limit: Most characters kept.
+
+    Returns:
+        ``text`` itself, or its first ``limit`` characters followed by
+        ``... (N characters)``.
+
+    """
+    if len(text) <= limit:
+        return text
+    return f'{text[:limit]}... ({len(text)} characters)'
+
+
+def wire_repr(value: object, limit: int = 40) -> str:
+    """Return ``repr(value)`` of a value from the wire, clipped by :func:`clip_text`."""
+    text = value if isinstance(value, str) else str(value)
+    if len(text) <= limit:
+        return repr(text) if isinstance(value, str) else text
+    clipped = repr(text[:limit]) if isinstance(value, str) else text[:limit]
+    return f'{clipped}... ({len(text)} characters)'

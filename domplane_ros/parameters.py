@@ -8,13 +8,15 @@ README's parameter table and the default params file are generated from.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import difflib
 import math
 from typing import Any, Mapping
 
-from domplane_ros.errors import ConfigError
+from domplane_ros.errors import ConfigError, wire_repr
 
 POTENTIAL_NAMES = ('least_squares', 'truncated_quadratic', 'huber', 'geman_mcclure')
 FEATURE_KINDS = ('points', 'lines', 'both')
+IMAGE_TRANSPORTS = ('raw', 'compressed')
 
 
 @dataclass(frozen=True)
@@ -105,6 +107,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('prior.vergence_deg', [-2.0, 4.0], 'range',
               "Vergence: the right camera's yaw toward the left camera, [min, max] degrees.",
               -45.0, 45.0),
+    ParamSpec('prior.principal_point_px', [], 'floats',
+              'Principal point [cx, cy] of both cameras in pixels; empty: the image centre '
+              '(set from camera_info when camera_info.topic is given).', 0.0, 1e5,
+              lengths=(0, 2)),
     ParamSpec('prior.samples', 5, 'int',
               'Samples per prior range for the candidate grid (samples^4 candidates).', 1, 12),
     ParamSpec('prior.refine_best', 6, 'int',
@@ -112,8 +118,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('prior.screen_threshold_px', 12.0, 'float',
               'Truncation of the cheap closest-point screening energy, in pixels.', 0.5, 500.0),
     ParamSpec('initial_homography', [], 'floats',
-              'Optional initial homography, 9 values row-major, left pixel to right pixel; '
-              'empty means search the prior.', lengths=(0, 9)),
+              'Optional initial homography, 9 values row-major, left pixel to right pixel '
+              '(finite, invertible: condition number at most 1e6 with pixels scaled by '
+              '1/1000); empty means search the prior.', lengths=(0, 9)),
     # Verification (every plane is verified before it is published).
     ParamSpec('verification.min_score', 0.25, 'float',
               'Least verification score (share of the textured image that the plane, and not '
@@ -222,12 +229,29 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'pipeline.fast_joint_velocity).'),
     ParamSpec('head.max_age_s', 0.5, 'float',
               'Joint states older than this (receive time) are ignored, seconds.', 0.0, 60.0),
+    ParamSpec('head.max_joint_velocity', 20.0, 'float',
+              'Joint states whose largest absolute velocity exceeds this (rad/s) are '
+              'implausible: flagged in the log and /diagnostics and not used as a hint.',
+              0.01, 1e4),
     # Synchroniser and transport.
     ParamSpec('sync.slop_s', 0.01, 'float',
               'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
     ParamSpec('sync.queue_size', 5, 'int',
               'Per-camera queue of the synchroniser; the oldest frame is dropped when full.',
               1, 1000),
+    ParamSpec('image_transport', 'raw', 'str',
+              "Image input of the node (image_transport's names): raw subscribes to "
+              'sensor_msgs/Image on left/image_raw and right/image_raw, compressed to '
+              'sensor_msgs/CompressedImage (JPEG or PNG) on <topic>/compressed, where <topic> '
+              'is the remapped image topic.', choices=IMAGE_TRANSPORTS),
+    ParamSpec('camera_info.topic', '', 'str',
+              'sensor_msgs/CameraInfo topic of the left camera (e.g. left/camera_info); '
+              'empty: none. When set, the first valid K narrows prior.focal_px to '
+              "K's focal length within camera_info.focal_tolerance and sets "
+              "prior.principal_point_px to K's principal point."),
+    ParamSpec('camera_info.focal_tolerance', 0.1, 'float',
+              'Relative tolerance of the focal length taken from camera_info: '
+              'prior.focal_px becomes f * [1 - t, 1 + t].', 0.0, 0.9),
     ParamSpec('qos.reliable', False, 'bool',
               'Subscribe with reliable QoS instead of sensor-data (best effort).'),
     ParamSpec('qos.depth', 2, 'int', 'Subscription queue depth.', 1, 100),
@@ -243,6 +267,16 @@ PARAMETERS_BY_NAME: dict[str, ParamSpec] = {spec.name: spec for spec in PARAMETE
 
 def _is_number(value: Any) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_finite_number(value: Any) -> bool:
+    """Return whether ``value`` is a number that a float holds finitely (huge ints are not)."""
+    if not _is_number(value):
+        return False
+    try:
+        return math.isfinite(float(value))
+    except OverflowError:
+        return False
 
 
 def check_value(spec: ParamSpec, value: Any) -> Any:
@@ -263,35 +297,37 @@ def check_value(spec: ParamSpec, value: Any) -> Any:
     name = spec.name
     if spec.kind == 'bool':
         if not isinstance(value, bool):
-            raise ConfigError(f'parameter {name!r}: expected a bool, got {value!r}')
+            raise ConfigError(f'parameter {name!r}: expected a bool, got {_shown(value)}')
         return value
     if spec.kind == 'str':
         if not isinstance(value, str):
-            raise ConfigError(f'parameter {name!r}: expected a string, got {value!r}')
+            raise ConfigError(f'parameter {name!r}: expected a string, got {_shown(value)}')
         if spec.choices is not None and value not in spec.choices:
             raise ConfigError(
-                f'parameter {name!r}: {value!r} is not one of {", ".join(spec.choices)}')
+                f'parameter {name!r}: {_shown(value)} is not one of {", ".join(spec.choices)}')
         return value
     if spec.kind == 'int':
         if not isinstance(value, int) or isinstance(value, bool):
-            raise ConfigError(f'parameter {name!r}: expected an integer, got {value!r}')
+            raise ConfigError(f'parameter {name!r}: expected an integer, got {_shown(value)}')
         _check_bounds(spec, value)
         return int(value)
     if spec.kind == 'float':
-        if not _is_number(value) or not math.isfinite(value):
-            raise ConfigError(f'parameter {name!r}: expected a finite number, got {value!r}')
+        if not _is_finite_number(value):
+            raise ConfigError(
+                f'parameter {name!r}: expected a finite number, got {_shown(value)}')
         _check_bounds(spec, float(value))
         return float(value)
     # Lists: 'range' and 'floats'.
     if isinstance(value, (str, bytes)) or not hasattr(value, '__len__'):
-        raise ConfigError(f'parameter {name!r}: expected a list of numbers, got {value!r}')
+        raise ConfigError(f'parameter {name!r}: expected a list of numbers, got {_shown(value)}')
     items = list(value)
-    if not all(_is_number(v) and math.isfinite(v) for v in items):
-        raise ConfigError(f'parameter {name!r}: expected finite numbers, got {items!r}')
+    if not all(_is_finite_number(v) for v in items):
+        raise ConfigError(
+            f'parameter {name!r}: expected finite numbers, got {_shown(items)}')
     items = [float(v) for v in items]
     if spec.kind == 'range':
         if len(items) != 2:
-            raise ConfigError(f'parameter {name!r}: expected [min, max], got {items!r}')
+            raise ConfigError(f'parameter {name!r}: expected [min, max], got {_shown(items)}')
         if items[0] > items[1]:
             raise ConfigError(
                 f'parameter {name!r}: inverted range [min, max] = {items!r} (min > max)')
@@ -304,16 +340,67 @@ def check_value(spec: ParamSpec, value: Any) -> Any:
             f'parameter {name!r}: expected {allowed} values, got {len(items)}')
     for v in items:
         _check_bounds(spec, v)
+    extra = _EXTRA_CHECKS.get(name)
+    if extra is not None and items:
+        extra(spec, items)
     return items
+
+
+def check_homography_values(spec: ParamSpec, values: list[float]) -> None:
+    """Refuse a homography that cannot be a warm start: singular or ill-conditioned.
+
+    The condition number is measured with pixel coordinates scaled by 1/1000 (so that a
+    translation of hundreds of pixels or a perspective term of 1e-3 weigh about 1, as in
+    Hartley normalisation of a 1000-pixel image), after scaling the matrix to unit largest
+    entry, so that values as large as 1e308 do not overflow.
+
+    Args:
+        spec: The parameter (for messages).
+        values: 9 finite floats, row-major.
+
+    Raises:
+        ConfigError: If the matrix is all zeros, singular or its condition number exceeds
+            :data:`MAX_HOMOGRAPHY_CONDITION`.
+
+    """
+    import numpy as np
+
+    matrix = np.asarray(values, dtype=np.float64).reshape(3, 3)
+    scale = float(np.max(np.abs(matrix)))
+    if scale == 0.0:
+        raise ConfigError(f'parameter {spec.name!r}: all zeros is not a homography')
+    scaled = matrix / scale
+    conditioning = np.diag([1e-3, 1e-3, 1.0])
+    normalised = conditioning @ scaled @ np.linalg.inv(conditioning)
+    singular = np.linalg.svd(normalised, compute_uv=False)
+    if not np.all(np.isfinite(singular)) or singular[2] <= 0.0:
+        raise ConfigError(f'parameter {spec.name!r}: singular matrix (rank '
+                          f'{int(np.linalg.matrix_rank(normalised))}), not invertible')
+    condition = float(singular[0] / singular[2])
+    if condition > MAX_HOMOGRAPHY_CONDITION:
+        raise ConfigError(
+            f'parameter {spec.name!r}: singular or nearly so (condition number '
+            f'{condition:.3g} > {MAX_HOMOGRAPHY_CONDITION:.0e}, pixels scaled by 1/1000)')
+
+
+MAX_HOMOGRAPHY_CONDITION = 1e6
+"""Largest condition number of ``initial_homography`` (pixels scaled by 1/1000) accepted."""
+
+_EXTRA_CHECKS = {'initial_homography': check_homography_values}
+
+
+def _shown(value: Any) -> str:
+    """Return ``repr(value)`` for a message, clipped to 80 characters with its length."""
+    return wire_repr(value, 80)
 
 
 def _check_bounds(spec: ParamSpec, value: float) -> None:
     if spec.low is not None and value < spec.low:
         raise ConfigError(
-            f'parameter {spec.name!r}: {value!r} is below the minimum {spec.low!r}')
+            f'parameter {spec.name!r}: {_shown(value)} is below the minimum {spec.low!r}')
     if spec.high is not None and value > spec.high:
         raise ConfigError(
-            f'parameter {spec.name!r}: {value!r} is above the maximum {spec.high!r}')
+            f'parameter {spec.name!r}: {_shown(value)} is above the maximum {spec.high!r}')
 
 
 def flatten_params(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any]:
@@ -345,8 +432,29 @@ def flatten_params(params: Mapping[str, Any], prefix: str = '') -> dict[str, Any
     return flat
 
 
-def default_params_yaml(node_name: str = 'plane_node') -> str:
-    """Return a ROS 2 parameters file with every parameter at its default, commented."""
+def nearest_parameter(name: str) -> str | None:
+    """Return the declared parameter name closest to ``name``, or None if none is close."""
+    matches = difflib.get_close_matches(name, list(PARAMETERS_BY_NAME), n=1, cutoff=0.6)
+    if not matches:
+        # A right leaf under a wrong or missing section ('focal_px' for 'prior.focal_px').
+        leaf = name.rsplit('.', 1)[-1]
+        matches = [spec.name for spec in PARAMETERS if spec.name.rsplit('.', 1)[-1] == leaf]
+    return matches[0] if matches else None
+
+
+def unknown_parameter_message(name: str) -> str:
+    """Return "unknown parameter 'x'" with the nearest declared name, if one is close."""
+    nearest = nearest_parameter(name)
+    hint = f' (did you mean {nearest!r}?)' if nearest else ''
+    return f'unknown parameter {name!r}{hint}'
+
+
+def default_params_yaml(node_name: str = '/**') -> str:
+    """Return a ROS 2 parameters file with every parameter at its default, commented.
+
+    The block is keyed ``/**`` by default, so it applies to the node under any name or
+    namespace (``-r __node:=front_plane``) and to ``plane_replay``.
+    """
     lines = [f'{node_name}:', '  ros__parameters:']
     for spec in PARAMETERS:
         value = spec.default

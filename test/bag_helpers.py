@@ -6,6 +6,7 @@ the pipeline's own results for it.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import cv2
@@ -117,6 +118,7 @@ def check_output(out: Path, expected, stamps, storage: str) -> None:
     assert bag['storage'] == storage
     assert bag['types'] == {'/plane/homography': 'std_msgs/msg/Float64MultiArray',
                             '/plane/mask': 'sensor_msgs/msg/Image',
+                            '/plane/result': 'diagnostic_msgs/msg/DiagnosticArray',
                             '/diagnostics': 'diagnostic_msgs/msg/DiagnosticArray'}
     msgs = bag['messages']
     masks = msgs['/plane/mask']
@@ -127,6 +129,16 @@ def check_output(out: Path, expected, stamps, storage: str) -> None:
         assert msg.header.frame_id == 'left_cam'
         assert msg.encoding == 'mono8'
         assert np.array_equal(mask_array(msg), result.mask)
+    results = msgs['/plane/result']
+    assert [t for t, _ in results] == stamps
+    for (bag_time, msg), result in zip(results, expected):
+        assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == bag_time
+        values = {kv.key: kv.value for kv in msg.status[0].values}
+        assert values['state'] == result.state
+        assert values['plane'] == ('true' if result.ok else 'false')
+        h = json.loads(values['homography'])
+        assert (np.array_equal(np.reshape(h, (3, 3)), result.homography) if result.ok
+                else h == [])
     ok_stamps = [s for s, r in zip(stamps, expected) if r.ok]
     assert ok_stamps, 'the scene should give some planes'
     homs = msgs.get('/plane/homography', [])

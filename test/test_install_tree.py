@@ -22,7 +22,7 @@ PACKAGE = 'domplane_ros'
 NOT_SOURCE = shutil.ignore_patterns(
     '.git', '.venv', '.hypothesis', '.pytest_cache', '__pycache__', '*.egg-info', 'build',
     'install', 'log', 'demo_output', 'bench_output', 'eval_output')
-LAUNCHERS = ('plane_node', 'plane_replay')
+LAUNCHERS = ('plane_node', 'plane_replay', 'plane_pair')
 
 
 @pytest.fixture(scope='module')
@@ -57,6 +57,7 @@ def test_ament_index_marker_and_share_files(install_prefix):
     package_xml = install_prefix / 'share' / PACKAGE / 'package.xml'
     assert ElementTree.parse(package_xml).getroot().findtext('name') == PACKAGE
     assert (install_prefix / 'share' / PACKAGE / 'config/plane_node.yaml').is_file()
+    assert (install_prefix / 'share' / PACKAGE / 'launch/plane_node.launch.py').is_file()
 
 
 @pytest.mark.parametrize('name', LAUNCHERS)

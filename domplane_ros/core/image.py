@@ -19,7 +19,7 @@ from array import array as py_array
 from typing import Any, NamedTuple
 
 import cv2
-from domplane_ros.errors import ImageDecodeError
+from domplane_ros.errors import ImageDecodeError, wire_repr
 import numpy as np
 
 
@@ -72,7 +72,7 @@ def _integer_field(msg: Any, name: str, allow_bool: bool = False) -> int:
         return int(value)
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
         raise ImageDecodeError(
-            f'image field {name!r} must be an integer, got {value!r} '
+            f'image field {name!r} must be an integer, got {wire_repr(value)} '
             f'of type {type(value).__name__}')
     value = int(value)
     if value < 0:
@@ -151,7 +151,7 @@ def _encoding_layout(encoding: Any) -> _EncodingLayout:
         return _LAYOUTS[encoding]
     except KeyError:
         raise ImageDecodeError(
-            f'unsupported encoding {encoding!r}; supported encodings are '
+            f'unsupported encoding {wire_repr(encoding)}; supported encodings are '
             f'{", ".join(SUPPORTED_ENCODINGS)}', kind='encoding') from None
 
 
@@ -259,21 +259,21 @@ def compressed_to_gray(msg: Any) -> np.ndarray:
             f"compressed image field 'format' must be a string, got {type(fmt).__name__}")
     lowered = fmt.lower()
     if 'compresseddepth' in lowered:
-        raise ImageDecodeError(f'unsupported compressed format {fmt!r}: compressedDepth',
+        raise ImageDecodeError(f'unsupported compressed format {wire_repr(fmt)}: compressedDepth',
                                kind='encoding')
     if not any(name in lowered for name in ('jpeg', 'jpg', 'png')):
         raise ImageDecodeError(
-            f'unsupported compressed format {fmt!r}; supported compressions are '
+            f'unsupported compressed format {wire_repr(fmt)}; supported compressions are '
             f'{", ".join(SUPPORTED_COMPRESSED_FORMATS)}', kind='encoding')
     data = _message_data(msg, 'compressed image')
     if data.size == 0:
-        raise ImageDecodeError(f'compressed image data is empty (format {fmt!r})',
+        raise ImageDecodeError(f'compressed image data is empty (format {wire_repr(fmt)})',
                                kind='compressed')
     gray = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
     if gray is None or gray.size == 0:
         raise ImageDecodeError(
             f'OpenCV could not decode {data.size} bytes of compressed image data '
-            f'(format {fmt!r})', kind='compressed')
+            f'(format {wire_repr(fmt)})', kind='compressed')
     if gray.dtype != np.uint8:  # IMREAD_GRAYSCALE gives 8 bits; keep the contract anyway.
         gray = (gray.astype(np.uint16) >> 8).astype(np.uint8)
     return np.ascontiguousarray(gray)

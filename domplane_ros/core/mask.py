@@ -70,10 +70,11 @@ _FILL_MIN_OUTLINE = 4
 _DIS_MIN_SIZE = 32
 # Translucency of the overlay tint.
 _TINT_ALPHA = 0.35
-_PLANE_RGB = (0, 255, 0)
-_OBSTACLE_RGB = (255, 0, 0)
-_INLIER_RGB = (0, 255, 255)
-_OUTLIER_RGB = (255, 0, 255)
+# Colours of :func:`overlay` (RGB); core/legend.py names them.
+PLANE_RGB = (0, 255, 0)
+OBSTACLE_RGB = (255, 0, 0)
+INLIER_RGB = (0, 255, 255)
+OUTLIER_RGB = (255, 0, 255)
 
 
 @dataclass(frozen=True)
@@ -395,8 +396,10 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
         gray: (H, W) uint8 image.
         mask: (H, W) uint8 labels from :func:`plane_mask`: plane pixels get a translucent
             green tint, obstacle pixels red, unknown pixels none.
-        inliers: Optional (N, 2) float (x, y) points, drawn as small cyan circles.
-        outliers: Optional (M, 2) float (x, y) points, drawn as small magenta crosses.
+        inliers: Optional (N, 2) float (x, y) points, drawn as small cyan circles (corners
+            the plane maps onto a right corner).
+        outliers: Optional (M, 2) float (x, y) points, drawn as small magenta crosses
+            (corners the plane maps onto none: unmatched, not necessarily off the plane).
         inlier_lines: Optional (K, 4) float segments (x1, y1, x2, y2), drawn in cyan.
         outlier_lines: Optional (L, 4) float segments, drawn in magenta.
 
@@ -413,21 +416,21 @@ def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = Non
     if mask.shape != gray.shape:
         raise ValueError(f'mask shape {mask.shape} differs from image shape {gray.shape}')
     rgb = cv2.cvtColor(gray, cv2.COLOR_GRAY2RGB)
-    for value, colour in ((PLANE, _PLANE_RGB), (OBSTACLE, _OBSTACLE_RGB)):
+    for value, colour in ((PLANE, PLANE_RGB), (OBSTACLE, OBSTACLE_RGB)):
         region = (mask == value).astype(np.uint8) if mask.size == 1 else cv2.compare(
             mask, value, cv2.CMP_EQ)  # cv2.compare takes a 1 x 1 array for a scalar
         if cv2.countNonZero(region):
             tinted = cv2.addWeighted(rgb, 1.0 - _TINT_ALPHA, np.full_like(rgb, colour),
                                      _TINT_ALPHA, 0.0)
             cv2.copyTo(tinted, region, rgb)
-    for name, segments, colour in (('inlier_lines', inlier_lines, _INLIER_RGB),
-                                   ('outlier_lines', outlier_lines, _OUTLIER_RGB)):
+    for name, segments, colour in (('inlier_lines', inlier_lines, INLIER_RGB),
+                                   ('outlier_lines', outlier_lines, OUTLIER_RGB)):
         for x1, y1, x2, y2 in _fixed_point_rows(name, segments, 4):
             cv2.line(rgb, (int(x1), int(y1)), (int(x2), int(y2)), colour, 1, cv2.LINE_AA,
                      shift=4)
     radius = max(2, int(round(min(gray.shape) / 160)))
-    for name, points, colour in (('inliers', inliers, _INLIER_RGB),
-                                 ('outliers', outliers, _OUTLIER_RGB)):
+    for name, points, colour in (('inliers', inliers, INLIER_RGB),
+                                 ('outliers', outliers, OUTLIER_RGB)):
         for x, y in _fixed_point_rows(name, points, 2):
             centre = (int(x), int(y))
             if name == 'inliers':

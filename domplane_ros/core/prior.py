@@ -3,7 +3,8 @@
 The camera model (shared with the scene renderer in :mod:`domplane_ros.sim.model`):
 
 * Left camera frame: x right, y down, z forward (optical axis). Principal point at the image
-  centre, square pixels, focal length ``f`` in pixels: ``K = [[f, 0, cx], [0, f, cy], [0, 0, 1]]``.
+  centre unless ``prior.principal_point_px`` gives it, square pixels, focal length ``f`` in
+  pixels: ``K = [[f, 0, cx], [0, f, cy], [0, 0, 1]]``.
 * The plane lies at height ``h`` below the left camera. The camera is tilted toward it by
   ``tilt`` (positive looks down), so the plane's unit normal in left-camera coordinates is
   ``n = (0, cos(tilt), sin(tilt))`` and the plane is ``n . X = h``.
@@ -22,7 +23,7 @@ estimator refines them all at once, the pipeline a few per frame.
 from __future__ import annotations
 
 import math
-from typing import Callable, Collection, Iterable, TYPE_CHECKING
+from typing import Callable, Collection, Iterable, Sequence, TYPE_CHECKING
 
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.result import better_estimate, FailedEstimate, PlaneEstimate
@@ -35,7 +36,8 @@ if TYPE_CHECKING:
 
 
 def plane_homography(focal_px: float, baseline_over_height: float, tilt_deg: float,
-                     vergence_deg: float, width: int, height: int) -> np.ndarray:
+                     vergence_deg: float, width: int, height: int,
+                     principal_px: Sequence[float] = ()) -> np.ndarray:
     """Return the left-to-right homography of the ground plane for one camera set-up.
 
     Args:
@@ -43,8 +45,9 @@ def plane_homography(focal_px: float, baseline_over_height: float, tilt_deg: flo
         baseline_over_height: Stereo baseline divided by the camera height above the plane.
         tilt_deg: Tilt of the cameras toward the plane, degrees (positive looks down).
         vergence_deg: Yaw of the right camera toward the left one, degrees.
-        width: Image width in pixels (principal point at the centre).
+        width: Image width in pixels.
         height: Image height in pixels.
+        principal_px: Principal point ``(cx, cy)`` in pixels; empty: the image centre.
 
     Returns:
         (3, 3) float64 homography with ``H[2, 2] == 1``, mapping left pixels (x, y, 1) to
@@ -61,7 +64,7 @@ def plane_homography(focal_px: float, baseline_over_height: float, tilt_deg: flo
     if focal_px <= 0 or width <= 0 or height <= 0:
         raise ValueError(
             f'focal_px, width and height must be positive, got {focal_px}, {width}, {height}')
-    k = intrinsics(focal_px, width, height)
+    k = intrinsics(focal_px, width, height, principal_px)
     tilt = math.radians(tilt_deg)
     verg = math.radians(vergence_deg)
     normal = np.array([0.0, math.cos(tilt), math.sin(tilt)])
@@ -75,10 +78,22 @@ def plane_homography(focal_px: float, baseline_over_height: float, tilt_deg: flo
     return h / h[2, 2]
 
 
-def intrinsics(focal_px: float, width: int, height: int) -> np.ndarray:
-    """Return the (3, 3) calibration matrix with the principal point at the image centre."""
-    return np.array([[focal_px, 0.0, (width - 1) / 2.0],
-                     [0.0, focal_px, (height - 1) / 2.0],
+def intrinsics(focal_px: float, width: int, height: int,
+               principal_px: Sequence[float] = ()) -> np.ndarray:
+    """Return the (3, 3) calibration matrix; the principal point is the image centre unless given.
+
+    Raises:
+        ValueError: If ``principal_px`` is neither empty nor two finite numbers.
+
+    """
+    if len(principal_px) == 0:
+        cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+    elif len(principal_px) == 2 and all(math.isfinite(v) for v in principal_px):
+        cx, cy = (float(v) for v in principal_px)
+    else:
+        raise ValueError(f'principal point must be empty or (cx, cy), got {principal_px!r}')
+    return np.array([[focal_px, 0.0, cx],
+                     [0.0, focal_px, cy],
                      [0.0, 0.0, 1.0]])
 
 
@@ -110,7 +125,7 @@ def prior_candidates(prior: PriorConfig, width: int, height: int) -> np.ndarray:
     """
     if width <= 0 or height <= 0:
         raise ValueError(f'image size must be positive, got {width}x{height}')
-    out = [plane_homography(f, bh, tilt, verg, width, height)
+    out = [plane_homography(f, bh, tilt, verg, width, height, prior.principal_point_px)
            for f in _samples(prior.focal_px, prior.samples)
            for bh in _samples(prior.baseline_over_height, prior.samples)
            for tilt in _samples(prior.tilt_deg, prior.samples)

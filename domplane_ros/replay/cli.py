@@ -10,7 +10,7 @@ same resets), and writes a new bag with the node's outputs::
     plane_replay INPUT_BAG OUTPUT_BAG [--params-file config/plane_node.yaml]
                  [--left-topic /left/image_raw] [--right-topic /right/image_raw]
                  [--storage sqlite3|mcap] [--force] [--csv FILE] [--no-progress]
-                 [--strict] [--keep-partial]
+                 [--strict] [--keep-partial] [--debug-images]
 
 Output topics, each written with the bag timestamp of the left image's header stamp:
 
@@ -21,15 +21,22 @@ Output topics, each written with the bag timestamp of the left image's header st
   processed pair; all 0 when no plane was found.
 * ``/diagnostics`` (``diagnostic_msgs/msg/DiagnosticArray``): the node's keys, once per
   ``diagnostics.period_s`` of bag time (1 s by default) and once at the end.
+* ``/plane/debug_image`` (``sensor_msgs/msg/Image``, rgb8, the left image's header), only with
+  ``--debug-images``: the node's ``plane/debug_image`` for every processed pair (mask tint,
+  corners matched on the plane in cyan, unmatched ones in magenta), to review a recording frame
+  by frame in Foxglove or rqt_image_view.
 
 Exit codes: 0 on success; 3 when the output is complete except for messages the bag could
 not give (undecodable payloads: skipped, counted, named on stderr and recorded in the output's
-``metadata.yaml`` ``custom_data``; ``--strict`` makes them fatal); 2 when the run is refused
+``metadata.yaml`` ``custom_data``; ``--strict`` makes them fatal); 4 when the bag was read to
+the end but gave no pair to process (no messages on a topic, none paired, none decoded): the
+summary says "no pairs" and why, and nothing is written; 2 when the run is refused
 before anything is written (missing, unreadable or truncated bag, a folder without
-metadata.yaml, unknown topic, existing output without ``--force``, invalid params file); 1 when
-reading fails part-way (a damaged bag, say): the partial output is removed, or with
-``--keep-partial`` kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its
-metadata); 130 on Ctrl-C and 143 on SIGTERM, the partial output removed.
+metadata.yaml, unknown topic, existing output without ``--force``, an output inside the input
+bag's folder, invalid params file); 1 when reading or writing fails part-way (a damaged bag,
+a full disk): the partial output is removed, or on a read failure with ``--keep-partial``
+kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its metadata); 130 on
+Ctrl-C and 143 on SIGTERM, the partial output removed. Every error is one line on stderr.
 
 The output is written into a hidden temporary folder next to ``OUTPUT_BAG`` and renamed into
 place only when it is complete, so an interrupted run never leaves a bag that looks complete.
@@ -56,8 +63,8 @@ from domplane_ros.errors import BagError, ConfigError
 from domplane_ros.replay.reader import (BagInput, BagReadError, describe_error, header_stamp_ns,
                                         ReplayedFrame, ReplaySession)
 from domplane_ros.replay.report import CsvOutput, PROG, ReplaySummary
-from domplane_ros.replay.writer import (BagOutput, DiagnosticsClock, keep_partial,
-                                        set_run_metadata, STORAGES)
+from domplane_ros.replay.writer import (BagOutput, BagWriteError, DiagnosticsClock,
+                                        keep_partial, set_run_metadata, STORAGES)
 from domplane_ros.stream.health import INPUT_COUNTER_NAMES
 from domplane_ros.stream.sync import Side
 
@@ -65,12 +72,24 @@ EXIT_OK = 0
 EXIT_FAILED = 1
 EXIT_REFUSED = 2
 EXIT_SKIPPED = 3          # complete, but messages the bag could not give were skipped
+EXIT_NO_PAIRS = 4         # read to the end, but no pair to process: nothing written
 EXIT_INTERRUPTED = 130    # Ctrl-C
 EXIT_TERMINATED = 143     # SIGTERM
 
 
 class Terminated(KeyboardInterrupt):
     """SIGTERM arrived; raised like Ctrl-C so that the partial output is removed."""
+
+
+class NoPairsError(BagError):
+    """The bag was read to the end but gave no pair to process; nothing was written.
+
+    Attributes:
+        summary: The run's summary (it says "no pairs" and why), set by :func:`run_replay`.
+
+    """
+
+    summary: ReplaySummary | None = None
 
 
 # --------------------------------------------------------------------------------------------
@@ -83,7 +102,8 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                force: bool = False, csv_path: str | os.PathLike[str] | None = None,
                progress: bool = False,
                on_frame: Callable[[ReplayedFrame], None] | None = None,
-               strict: bool = False, keep_partial: bool = False) -> ReplaySummary:
+               strict: bool = False, keep_partial: bool = False,
+               debug_images: bool = False) -> ReplaySummary:
     """Replay a bag through the pipeline and write the node's outputs to a new bag.
 
     Everything that can be checked up front is checked before anything is written.
@@ -104,6 +124,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
         keep_partial: On a read failure part-way, keep the output up to it as
             ``OUTPUT_BAG.incomplete`` (and ``CSV.incomplete``), marked
             ``plane_replay.complete: 'false'`` in its metadata, instead of removing it.
+        debug_images: Also write ``/plane/debug_image`` (the node's debug overlay, rgb8).
 
     Returns:
         The summary.
@@ -122,8 +143,14 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     t_start = time.perf_counter()
     with BagInput(paths.input_bag, left_topic, right_topic) as bag:
         run = _Run(bag, paths, config if config is not None else PlaneNodeConfig(),
-                   (left_topic, right_topic), storage or bag.storage, force, progress)
-        run.execute(on_frame, strict, keep_partial)
+                   (left_topic, right_topic), storage or bag.storage, force, progress,
+                   debug_images)
+        try:
+            run.execute(on_frame, strict, keep_partial)
+        except NoPairsError as err:
+            err.summary = run.summarise(time.perf_counter() - t_start)
+            err.summary.no_pairs = str(err)
+            raise
     return run.summarise(time.perf_counter() - t_start)
 
 
@@ -163,13 +190,15 @@ class _Run:
     """One replay's open outputs and its session, from the first message to the summary."""
 
     def __init__(self, bag: BagInput, paths: _RunPaths, config: PlaneNodeConfig,
-                 topics: tuple[str, str], storage: str, force: bool, progress: bool) -> None:
+                 topics: tuple[str, str], storage: str, force: bool, progress: bool,
+                 debug_images: bool = False) -> None:
         self.bag = bag
         self.paths = paths
         self.summary = ReplaySummary(str(paths.input_bag), str(paths.output_bag), storage)
         self.session = ReplaySession(config, topics)
         self.clock = DiagnosticsClock(config.transport.diagnostics_period_s)
-        self.output = BagOutput(paths.output_bag, storage, replace=force)
+        self.output = BagOutput(paths.output_bag, storage, replace=force,
+                                debug_images=debug_images)
         self.table = CsvOutput(paths.csv) if paths.csv is not None else None
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
@@ -187,6 +216,7 @@ class _Run:
                     self._write_frame(frame, on_frame)
                 self._show_progress()
             self._take_undecodable(strict)
+            self._check_pairs()
             self._commit()
         except BagReadError as err:
             self.bar.close()
@@ -200,6 +230,24 @@ class _Run:
             self.bar.close()
             self._abort()
             raise
+
+    def _check_pairs(self) -> None:
+        """Refuse to commit an output that holds no processed pair (NoPairsError)."""
+        counters, summary = self.session.counters, self.summary
+        if counters.processed:
+            return
+        left, right = self.bag.sides_topics()
+        if not summary.left_messages or not summary.right_messages:
+            reason = (f'the bag has {summary.left_messages} readable messages on {left} and '
+                      f'{summary.right_messages} on {right}')
+        elif not counters.pairs:
+            reason = (f'{summary.left_messages} left and {summary.right_messages} right '
+                      'messages, none within sync.slop_s '
+                      f'{self.session.config.sync.slop_s:g} s of a partner')
+        else:
+            reason = (f'none of the {counters.pairs} pairs could be decoded (last: '
+                      f'{self.session.last_error})')
+        raise NoPairsError(f'no pairs: {reason}')
 
     def _take_undecodable(self, strict: bool) -> None:
         """Count the messages the bag could not give since the last call (fatal if strict)."""
@@ -246,6 +294,9 @@ class _Run:
         set_run_metadata(self.output, self.paths.input_bag, len(self.bag.undecodable),
                          complete=True)
         self.bar.close()
+        # Everything that can fail on a full disk (closing the bag, flushing the CSV file)
+        # before anything is moved into place: both outputs appear, or neither.
+        self.output.close()
         if self.table is not None:
             self.table.commit()
         self.output.commit()
@@ -279,17 +330,35 @@ class _Run:
         return summary
 
 
+def input_bag_folder(input_bag: Path) -> Path:
+    """Return the folder an input bag occupies, resolved: nothing may be written inside it.
+
+    A bag folder is itself; a storage file inside a bag folder (its folder holds
+    ``metadata.yaml``, or the file is named after its folder as rosbag2 names them,
+    ``NAME/NAME_0.db3``) is that folder; a storage file on its own is the file.
+    """
+    resolved = input_bag.resolve()
+    if resolved.is_dir():
+        return resolved
+    folder = resolved.parent
+    if (folder / 'metadata.yaml').exists() or resolved.name.startswith(folder.name + '_'):
+        return folder
+    return resolved
+
+
 def _check_paths(input_bag: Path, output_bag: Path, csv_path: Path | None,
                  force: bool) -> None:
-    in_res = input_bag.resolve()
+    in_res = input_bag_folder(input_bag)
     out_res = output_bag.resolve()
-    if out_res == in_res or in_res.is_relative_to(out_res) or out_res.is_relative_to(in_res):
+    if (out_res == in_res or in_res.is_relative_to(out_res) or out_res.is_relative_to(in_res)
+            or input_bag.resolve().is_relative_to(out_res)):
         raise BagError(f'output {str(output_bag)!r} would overwrite or nest in the input bag '
-                       f'{str(input_bag)!r}')
+                       f'{str(input_bag)!r} (its folder {str(in_res)!r})')
     if (output_bag.exists() or output_bag.is_symlink()) and not force:
         raise BagError(f'output {str(output_bag)!r} exists; use --force to replace it')
     if csv_path is not None:
-        if csv_path.resolve().is_relative_to(in_res) or csv_path.resolve() == out_res:
+        if (csv_path.resolve().is_relative_to(in_res) or csv_path.resolve() == out_res
+                or csv_path.resolve().is_relative_to(out_res)):
             raise BagError(f'CSV file {str(csv_path)!r} would overwrite a bag')
         if csv_path.exists() and not force:
             raise BagError(f'CSV file {str(csv_path)!r} exists; use --force to replace it')
@@ -355,6 +424,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--strict', action='store_true',
                         help='fail (exit 1, output removed) on the first message that cannot '
                              'be deserialised, instead of skipping it (exit 3)')
+    parser.add_argument('--debug-images', action='store_true',
+                        help='also write /plane/debug_image (rgb8: mask tint, matched and '
+                             'unmatched corners) for every pair, to review in Foxglove')
     bar = parser.add_mutually_exclusive_group()
     bar.add_argument('--no-progress', dest='progress', action='store_false', default=None,
                      help='no progress bar (the default when stderr is not a terminal)')
@@ -375,9 +447,10 @@ def main(argv: list[str] | None = None) -> int:
 
     Returns:
         0 on success; 3 when the output is complete except for messages the bag could not
-        give (skipped, counted and named on stderr); 2 if the run was refused (nothing
-        written); 1 if it failed part-way (the partial output removed); 130 on Ctrl-C and
-        143 on SIGTERM (the partial output removed).
+        give (skipped, counted and named on stderr); 4 if the bag gave no pair (nothing
+        written); 2 if the run was refused (nothing written); 1 if it failed part-way (the
+        partial output removed); 130 on Ctrl-C and 143 on SIGTERM (the partial output
+        removed).
 
     """
     parser = build_parser()
@@ -399,13 +472,22 @@ def main(argv: list[str] | None = None) -> int:
                              left_topic=args.left_topic, right_topic=args.right_topic,
                              storage=args.storage, force=args.force, csv_path=args.csv,
                              progress=progress, strict=args.strict,
-                             keep_partial=args.keep_partial)
+                             keep_partial=args.keep_partial,
+                             debug_images=args.debug_images)
     except Terminated:
         _error('terminated (SIGTERM); the partial output was removed')
         return EXIT_TERMINATED
     except BagReadError as err:
         _error(str(err) if err.kept else f'{err}; the partial output was removed')
         return EXIT_FAILED
+    except BagWriteError as err:
+        _error(f'{err}; the partial output was removed')
+        return EXIT_FAILED
+    except NoPairsError as err:
+        if err.summary is not None:
+            print('\n'.join(err.summary.lines()))
+        _error(f'{err}; nothing was written')
+        return EXIT_NO_PAIRS
     except BagError as err:
         _error(str(err))
         return EXIT_REFUSED

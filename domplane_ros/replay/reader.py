@@ -16,7 +16,7 @@ from typing import Any, Iterable, Iterator, NamedTuple
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.image import message_to_gray
-from domplane_ros.errors import BagError, ImageDecodeError
+from domplane_ros.errors import BagError, clip_text, ImageDecodeError
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 from domplane_ros.stream.session import DEFAULT_TOPICS, ProcessedPair, StreamSession
 from domplane_ros.stream.sync import ApproximateTimeSync, Pair, Side
@@ -189,8 +189,9 @@ class BagMessage(NamedTuple):
 
 
 def describe_error(err: BaseException) -> str:
-    text = str(err).strip().rstrip('.')
-    return f'{type(err).__name__}: {text}' if text else type(err).__name__
+    """Return ``'Type: message'`` of an error on one line, clipped to 200 characters."""
+    text = ' '.join(str(err).split()).rstrip('.')
+    return clip_text(f'{type(err).__name__}: {text}' if text else type(err).__name__, 200)
 
 
 def _damage_hint(err: BaseException) -> str:
@@ -270,6 +271,11 @@ class BagInput:
         except BaseException:
             self.close()
             raise
+
+    def sides_topics(self) -> tuple[str, str]:
+        """Return the ``(left, right)`` topic names."""
+        by_side = {side: topic for topic, side in self.sides.items()}
+        return by_side['left'], by_side['right']
 
     def messages(self) -> Iterator[BagMessage]:
         """Yield the left and right image messages in bag order.

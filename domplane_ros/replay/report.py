@@ -72,8 +72,11 @@ class CsvOutput:
         os.replace(self._tmp, path if path is not None else self.path)
 
     def abort(self) -> None:
-        """Drop the partial file."""
-        self._stream.close()
+        """Drop the partial file (never raises: it runs while another error is handled)."""
+        try:
+            self._stream.close()
+        except OSError:
+            pass   # a full disk cannot flush what is about to be removed anyway
         self._tmp.unlink(missing_ok=True)
 
 
@@ -101,6 +104,8 @@ class ReplaySummary:
         written: Messages written per output topic.
         first_errors: The first few decode errors, for the report.
         input_problems: Input problems seen, by diagnostics key (only the non-zero ones).
+        no_pairs: Why the bag gave no pair to process ('' if it gave some); then nothing
+            was written.
 
     """
 
@@ -123,6 +128,7 @@ class ReplaySummary:
     written: dict[str, int] = field(default_factory=dict)
     first_errors: list[str] = field(default_factory=list)
     input_problems: dict[str, int] = field(default_factory=dict)
+    no_pairs: str = ''
 
     @property
     def rate_pairs_per_s(self) -> float:
@@ -149,11 +155,13 @@ class ReplaySummary:
             f'  plane found:     {self.plane_found} ({self.percent(self.plane_found):.1f} %), '
             f'converged {self.converged} ({self.percent(self.converged):.1f} %), '
             f're-initialisations {self.reinitialisations}',
-            f'  latency:         median {self.latency_percentile(50):.1f} ms, '
-            f'p95 {self.latency_percentile(95):.1f} ms; '
-            f'{self.rate_pairs_per_s:.1f} pairs/s over {self.wall_s:.1f} s',
-            '  written:         ' + ', '.join(f'{topic} {count}'
-                                              for topic, count in self.written.items()),
+            (f'  latency:         median {self.latency_percentile(50):.1f} ms, '
+             f'p95 {self.latency_percentile(95):.1f} ms; ' if self.latency_ms
+             else '  latency:         n/a (no pair processed); ')
+            + f'{self.rate_pairs_per_s:.1f} pairs/s over {self.wall_s:.1f} s',
+            ('  written:         ' + ', '.join(f'{topic} {count}'
+                                               for topic, count in self.written.items())
+             if not self.no_pairs else f'  written:         nothing ({self.no_pairs})'),
         ]
         if self.input_problems:
             out.append('  input problems:  ' + ', '.join(

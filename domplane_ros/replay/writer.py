@@ -1,24 +1,28 @@
 """Writing plane_node's outputs into a bag that appears only when it is complete.
 
-:class:`BagOutput` writes ``/plane/homography``, ``/plane/mask`` and ``/diagnostics`` (rosbags
-message types) into a hidden temporary folder next to the output and renames it into place at
-:meth:`BagOutput.commit`; :func:`keep_partial` commits what a failed run wrote as
-``OUTPUT_BAG.incomplete`` instead. :class:`DiagnosticsClock` says when a diagnostics message
-is due, in bag time.
+:class:`BagOutput` writes ``/plane/homography``, ``/plane/mask``, ``/plane/result`` and
+``/diagnostics`` (rosbags message types) into a hidden temporary folder next to the output
+and renames it into place at :meth:`BagOutput.commit`; :func:`keep_partial` commits what a
+failed run wrote as ``OUTPUT_BAG.incomplete`` instead. :class:`DiagnosticsClock` says when a
+diagnostics message is due, in bag time.
 """
 
 from __future__ import annotations
 
+import contextlib
+import errno
 import os
 from pathlib import Path
 import shutil
+import sqlite3
 import tempfile
-from typing import Any
+from typing import Any, Iterator
 
-from domplane_ros.core.image import gray_to_image_fields
-from domplane_ros.errors import BagError
+from domplane_ros.core.image import gray_to_image_fields, rgb_to_image_fields
+from domplane_ros.errors import BagError, clip_text
 from domplane_ros.replay.reader import BagReadError, IMAGE_TYPE, ReplayedFrame, typestore
-from domplane_ros.stream.status import STATUS_NAME
+from domplane_ros.stream.frame import debug_overlay
+from domplane_ros.stream.status import result_status, RESULT_STATUS_NAME, STATUS_NAME
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
 
@@ -27,12 +31,29 @@ DIAGNOSTICS_TYPE = 'diagnostic_msgs/msg/DiagnosticArray'
 
 HOMOGRAPHY_TOPIC = '/plane/homography'
 MASK_TOPIC = '/plane/mask'
+RESULT_TOPIC = '/plane/result'
+DEBUG_IMAGE_TOPIC = '/plane/debug_image'
 DIAGNOSTICS_TOPIC = '/diagnostics'
 
 STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
 
 _DIAGNOSTICS_NAME = STATUS_NAME
 _DIAGNOSTICS_HARDWARE_ID = 'plane_replay'
+
+
+class BagWriteError(BagError):
+    """Writing the output failed (a full disk, a read-only or vanished folder)."""
+
+
+def _write_problem(err: BaseException) -> str:
+    """Return a write error in words (``'No space left on device (disk full)'``)."""
+    if isinstance(err, OSError):
+        text = err.strerror or str(err)
+        full = err.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+    else:   # sqlite3 says 'database or disk is full' for every short write
+        text = str(err)
+        full = 'full' in text
+    return clip_text(' '.join(text.split()), 200) + (' (disk full)' if full else '')
 
 
 class BagOutput:
@@ -46,27 +67,39 @@ class BagOutput:
         path: Where the finished bag goes.
         storage: ``'sqlite3'`` or ``'mcap'``.
         replace: Replace an existing ``path`` at commit.
+        debug_images: Also write ``/plane/debug_image`` (rgb8, the node's debug overlay) for
+            every processed pair.
 
     """
 
-    def __init__(self, path: str | os.PathLike[str], storage: str, replace: bool) -> None:
-        """Create the temporary bag and its three connections."""
+    def __init__(self, path: str | os.PathLike[str], storage: str, replace: bool,
+                 debug_images: bool = False) -> None:
+        """Create the temporary bag and its connections."""
         self.path = Path(path)
         self.replace = replace
         self.typestore = ts = typestore()
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._tmpdir = Path(tempfile.mkdtemp(prefix=f'.{self.path.name}.partial-',
                                              dir=self.path.parent))
-        self.counts = {HOMOGRAPHY_TOPIC: 0, MASK_TOPIC: 0, DIAGNOSTICS_TOPIC: 0}
+        self.counts = {HOMOGRAPHY_TOPIC: 0, MASK_TOPIC: 0, RESULT_TOPIC: 0, DIAGNOSTICS_TOPIC: 0}
+        self._closed = False
         try:
             self._writer = Writer(self._tmpdir / self.path.name, version=9,
                                   storage_plugin=STORAGES[storage])
-            self._writer.open()
+            with self._writing():
+                self._writer.open()
             self._conn_h = self._writer.add_connection(HOMOGRAPHY_TOPIC, HOMOGRAPHY_TYPE,
                                                        typestore=ts)
             self._conn_mask = self._writer.add_connection(MASK_TOPIC, IMAGE_TYPE, typestore=ts)
+            self._conn_result = self._writer.add_connection(RESULT_TOPIC, DIAGNOSTICS_TYPE,
+                                                            typestore=ts)
             self._conn_diag = self._writer.add_connection(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE,
                                                           typestore=ts)
+            self._conn_debug = None
+            if debug_images:
+                self._conn_debug = self._writer.add_connection(DEBUG_IMAGE_TOPIC, IMAGE_TYPE,
+                                                               typestore=ts)
+                self.counts[DEBUG_IMAGE_TOPIC] = 0
         except BaseException:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             raise
@@ -81,15 +114,26 @@ class BagOutput:
         self._DiagnosticStatus = t['diagnostic_msgs/msg/DiagnosticStatus']
         self._KeyValue = t['diagnostic_msgs/msg/KeyValue']
 
+    @contextlib.contextmanager
+    def _writing(self) -> Iterator[None]:
+        """Turn the storage's write errors (a full disk, say) into :class:`BagWriteError`."""
+        try:
+            yield
+        except (OSError, sqlite3.Error) as err:
+            raise BagWriteError(f'writing the output bag {str(self.path)!r} failed: '
+                                f'{_write_problem(err)}') from err
+
     def _write(self, connection: Any, topic: str, stamp_ns: int, msg: Any) -> None:
         data = self.typestore.serialize_cdr(msg, connection.msgtype)
-        self._writer.write(connection, stamp_ns, data)
+        with self._writing():
+            self._writer.write(connection, stamp_ns, data)
         self.counts[topic] += 1
 
     def write_frame(self, frame: ReplayedFrame) -> None:
-        """Write a processed pair: its homography (if a plane was found) and its mask.
+        """Write a processed pair: homography (with a plane), result, mask and debug image.
 
-        Both are written at the left image's header stamp; the mask carries the left header.
+        All are written at the left image's header stamp; the result, the mask and the debug
+        image (only with ``debug_images``) carry the left header, as the node publishes them.
         """
         header = frame.pair.left.header
         stamp = frame.pair.left_stamp_ns
@@ -106,6 +150,22 @@ class BagOutput:
             is_bigendian=fields['is_bigendian'], step=fields['step'],
             data=np.frombuffer(fields['data'], np.uint8))
         self._write(self._conn_mask, MASK_TOPIC, stamp, mask)
+        level, message, values = result_status(frame)
+        self._write(self._conn_result, RESULT_TOPIC, stamp, self._DiagnosticArray(
+            header=mask.header, status=[self._DiagnosticStatus(
+                level=level, name=RESULT_STATUS_NAME, message=message,
+                hardware_id=_DIAGNOSTICS_HARDWARE_ID,
+                values=[self._KeyValue(key=k, value=v) for k, v in values])]))
+        if self._conn_debug is not None:
+            self._write_debug_image(frame, mask.header)
+
+    def _write_debug_image(self, frame: ReplayedFrame, header: Any) -> None:
+        """Write the node's debug overlay of a pair (rgb8) with the given header."""
+        fields = rgb_to_image_fields(debug_overlay(frame.left, frame.result), 'rgb8')
+        image = self._Image(header=header, height=fields['height'], width=fields['width'],
+                            encoding=fields['encoding'], is_bigendian=fields['is_bigendian'],
+                            step=fields['step'], data=np.frombuffer(fields['data'], np.uint8))
+        self._write(self._conn_debug, DEBUG_IMAGE_TOPIC, frame.pair.left_stamp_ns, image)
 
     def homography_msg(self, homography: np.ndarray) -> Any:
         """Return the node's Float64MultiArray for a (3, 3) homography (rosbags message)."""
@@ -132,11 +192,30 @@ class BagOutput:
 
     def set_custom_data(self, key: str, value: str) -> None:
         """Record a key/value string in the output bag's metadata.yaml ``custom_data``."""
-        self._writer.set_custom_data(key, value)
+        with self._writing():
+            self._writer.set_custom_data(key, value)
+
+    def close(self) -> None:
+        """Finish the storage in the temporary folder (idempotent); nothing is moved yet.
+
+        Raises:
+            BagWriteError: If the storage cannot be completed (a full disk).
+
+        """
+        if not self._closed:
+            with self._writing():
+                self._writer.close()
+            self._closed = True
 
     def commit(self, path: str | os.PathLike[str] | None = None) -> None:
-        """Close the bag and move it into place (to ``path`` instead, if given)."""
-        self._writer.close()
+        """Close the bag and move it into place (to ``path`` instead, if given).
+
+        Raises:
+            BagWriteError: If the storage cannot be completed (a full disk); the bag stays in
+                its temporary folder for :meth:`abort`.
+
+        """
+        self.close()
         finished = self._tmpdir / self.path.name
         target = Path(path) if path is not None else self.path
         if target.exists() or target.is_symlink():
@@ -149,10 +228,12 @@ class BagOutput:
         shutil.rmtree(self._tmpdir, ignore_errors=True)
 
     def abort(self) -> None:
-        """Drop the partial bag."""
+        """Drop the partial bag (never raises: it runs while another error is handled)."""
         try:
-            if self._writer.storage is not None:
+            if not self._closed and self._writer.storage is not None:
                 self._writer.abort()
+        except Exception:  # noqa: B902 - a full disk cannot flush what is removed anyway
+            pass
         finally:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
 

@@ -7,6 +7,7 @@ from typing import Any, Iterable
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from domplane_ros.config import ParamSpec
 from domplane_ros.core.image import gray_to_image_fields, rgb_to_image_fields
+from domplane_ros.stream.status import result_status, RESULT_STATUS_NAME
 import numpy as np
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType
@@ -24,19 +25,19 @@ _TYPES = {
 
 # Parameters that only take effect when the node starts.
 READ_ONLY = frozenset({'qos.reliable', 'qos.depth', 'diagnostics.period_s',
-                       'head.joint_states_topic'})
+                       'head.joint_states_topic', 'image_transport', 'camera_info.topic'})
 
 
 def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     """Build the ROS ParameterDescriptor of a spec: description, type, range."""
     # Dynamic typing lets the node's own validator (config.check_value) judge every value, so
-    # a refused value gets a reason that names the parameter, and an integer is accepted for
-    # a float as the replay's YAML reader accepts it. A parameter whose default is an empty
-    # list has no value type to infer, so it keeps its declared type.
+    # a refused value gets a reason that names the parameter, and an integer (or a list of
+    # integers, as for initial_homography) is accepted for a float as the replay's YAML
+    # reader accepts it. A parameter whose default is an empty list is declared unset
+    # (the node reads that as its default).
     desc = ParameterDescriptor(name=spec.name, type=_TYPES[spec.kind],
                                description=spec.description,
-                               read_only=spec.name in READ_ONLY,
-                               dynamic_typing=not _empty_list(spec.default))
+                               read_only=spec.name in READ_ONLY, dynamic_typing=True)
     constraints = []
     if spec.kind == 'float' and spec.low is not None and spec.high is not None:
         desc.floating_point_range = [FloatingPointRange(
@@ -54,10 +55,6 @@ def descriptor(spec: ParamSpec) -> ParameterDescriptor:
     return desc
 
 
-def _empty_list(value: Any) -> bool:
-    return isinstance(value, (list, tuple)) and not value
-
-
 def homography_msg(matrix: np.ndarray) -> Float64MultiArray:
     """Build the 3x3 row-major Float64MultiArray (dims rows=3, cols=3), ``H[2][2] == 1``."""
     msg = Float64MultiArray()
@@ -66,6 +63,31 @@ def homography_msg(matrix: np.ndarray) -> Float64MultiArray:
     msg.layout.data_offset = 0
     msg.data = [float(v) for v in np.asarray(matrix, dtype=np.float64).ravel()]
     return msg
+
+
+def result_msg(header: Header, hardware_id: str, frame: Any) -> DiagnosticArray:
+    """Build the stamped per-pair result: a DiagnosticArray with one status named ``plane``.
+
+    The array's header is the left image's (stamp and frame id), so the result matches the
+    mask of the same pair; the status is :func:`~domplane_ros.stream.status.result_status`.
+
+    Args:
+        header: The left image's header.
+        hardware_id: The node's fully qualified name.
+        frame: The processed pair (a ``ProcessedPair``).
+
+    Returns:
+        The message.
+
+    """
+    level, message, values = result_status(frame)
+    status = DiagnosticStatus(level=bytes([level]), name=RESULT_STATUS_NAME,
+                              hardware_id=hardware_id, message=message)
+    status.values = [KeyValue(key=k, value=v) for k, v in values]
+    array = DiagnosticArray()
+    array.header = header
+    array.status = [status]
+    return array
 
 
 def stamped_header(stamp_ns: int, frame_id: str) -> Header:

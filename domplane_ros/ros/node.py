@@ -1,10 +1,12 @@
 """plane_node: the live ROS 2 adapter around :class:`~domplane_ros.stream.session.StreamSession`.
 
-Subscribes to ``left/image_raw`` and ``right/image_raw``, pairs them by stamp, and publishes
-``plane/homography``, ``plane/mask``, ``plane/debug_image`` and ``plane/parallax`` (both
-only while subscribed) and ``/diagnostics``. If ``head.joint_states_topic`` is set, it also
-subscribes to the head's ``sensor_msgs/JointState``: a fast joint is a hint to the pipeline to
-expect a big change.
+Subscribes to ``left/image_raw`` and ``right/image_raw`` (or, with ``image_transport``
+``compressed``, to ``<topic>/compressed`` of those topics after remapping, as image_transport
+does), pairs them by stamp, and publishes ``plane/result`` (the stamped result of every pair),
+``plane/homography``, ``plane/mask``, ``plane/debug_image`` and ``plane/parallax`` (both only
+while subscribed) and ``/diagnostics``. If ``camera_info.topic`` is set, the left camera's K
+narrows the prior. If ``head.joint_states_topic`` is set, it also subscribes to the head's
+``sensor_msgs/JointState``: a fast joint is a hint to the pipeline to expect a big change.
 Image callbacks only hand work over: a worker thread processes the newest pair, and a pair
 that is replaced before the worker takes it is counted as dropped (:class:`NewestSlot`).
 The session keeps every count and builds the status; the node decodes nothing itself.
@@ -19,16 +21,19 @@ from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
-                                 PlaneNodeConfig)
+                                 PlaneNodeConfig, unknown_parameter_message)
+from domplane_ros.errors import wire_repr
+from domplane_ros.ros.camera_info import camera_model
 from domplane_ros.ros.handover import NewestSlot
 from domplane_ros.ros.messages import descriptor, diagnostics_msg, homography_msg, image_msg
-from domplane_ros.ros.messages import parallax_msg
-from domplane_ros.ros.messages import READ_ONLY
+from domplane_ros.ros.messages import parallax_msg, READ_ONLY, result_msg
+from domplane_ros.ros.startup import check_params_files, init_rclpy
+from domplane_ros.ros.usage import usage, wants_help
 from domplane_ros.stream.frame import parallax_image
 from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.stream.session import ProcessedPair, SIDES, StreamSession
-from domplane_ros.stream.status import STATUS_NAME
+from domplane_ros.stream.status import format_number, JOINT_SPEED_KEY, STATUS_NAME
 from domplane_ros.stream.sync import Pair
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
@@ -41,10 +46,9 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_sensor_data, QoSProfile,
                        ReliabilityPolicy)
-from sensor_msgs.msg import Image, JointState
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from std_msgs.msg import Float64MultiArray
 
-_EMPTY_ARRAY_KINDS = {'floats': Parameter.Type.DOUBLE_ARRAY}
 _THROTTLE_S = 5.0
 
 
@@ -73,9 +77,13 @@ class PlaneNode(Node):
         self._values = self._declare_parameters()
         config = PlaneNodeConfig.from_flat(self._values)
         self.slot: NewestSlot[Pair] = NewestSlot()
+        self._stopping = False
         self._throttle = Throttle(_THROTTLE_S)
         self._qos_warned: set[str] = set()
         self._joint_speed: tuple[float, float] | None = None  # (rad/s, monotonic receive time)
+        self._camera_model: tuple[float, ...] | None = None  # the K applied to the prior
+        self._implausible_joint: tuple[float, float] | None = None
+        self.implausible_joint_states = 0
         self._make_publishers()
         self._subs = self._make_subscriptions(config)
         topics = tuple(sub.topic_name for sub in self._subs)
@@ -88,6 +96,7 @@ class PlaneNode(Node):
         self._worker.start()
         self.get_logger().info(
             f'plane_node ready: {topics[0]} + {topics[1]}, '
+            f'{config.transport.image_transport}, '
             f'{"reliable" if config.transport.reliable else "best-effort"} QoS, '
             f'potential {config.estimator.potential}')
 
@@ -102,6 +111,7 @@ class PlaneNode(Node):
         return self.session.pipeline
 
     def _make_publishers(self) -> None:
+        self._pub_result = self.create_publisher(DiagnosticArray, 'plane/result', 10)
         self._pub_h = self.create_publisher(Float64MultiArray, 'plane/homography', 10)
         self._pub_mask = self.create_publisher(Image, 'plane/mask', 10)
         self._pub_debug = self.create_publisher(Image, 'plane/debug_image', 2)
@@ -115,12 +125,23 @@ class PlaneNode(Node):
             reliability=(ReliabilityPolicy.RELIABLE if transport.reliable
                          else ReliabilityPolicy.BEST_EFFORT),
             durability=DurabilityPolicy.VOLATILE)
+        # image_transport's convention: the compressed stream of a (remapped) image topic T
+        # is T/compressed, so remapping left/image_raw serves both transports.
+        compressed = transport.image_transport == 'compressed'
         subs = [
             self.create_subscription(
-                Image, f'{side}/image_raw', lambda msg, s=side: self.on_image(s, msg), qos,
+                CompressedImage if compressed else Image,
+                (self.resolve_topic_name(f'{side}/image_raw') + '/compressed' if compressed
+                 else f'{side}/image_raw'),
+                lambda msg, s=side: self.on_image(s, msg), qos,
                 event_callbacks=SubscriptionEventCallbacks(
                     incompatible_qos=lambda info, s=side: self._on_incompatible_qos(s, info)))
             for side in SIDES]
+        self._camera_info_sub = None
+        if transport.camera_info_topic:
+            self._camera_info_sub = self.create_subscription(
+                CameraInfo, transport.camera_info_topic, self._on_camera_info,
+                qos_profile_sensor_data)
         self._joint_sub = None
         if config.head.joint_states_topic:
             # Sensor-data QoS matches both reliable and best-effort publishers.
@@ -134,8 +155,8 @@ class PlaneNode(Node):
         values: dict[str, Any] = {}
         for spec in PARAMETERS:
             default: Any = spec.default
-            if spec.kind in _EMPTY_ARRAY_KINDS and not default:
-                default = _EMPTY_ARRAY_KINDS[spec.kind]
+            if isinstance(default, list) and not default:
+                default = None   # unset: an empty list has no type to declare
             try:
                 param = self.declare_parameter(spec.name, default, descriptor(spec))
             except (InvalidParameterTypeException, InvalidParameterValueException,
@@ -157,7 +178,7 @@ class PlaneNode(Node):
         unknown = sorted(name for name in overrides
                          if name not in PARAMETERS_BY_NAME and name != 'use_sim_time')
         if unknown:
-            raise ConfigError(f'unknown parameter {unknown[0]!r}')
+            raise ConfigError(unknown_parameter_message(unknown[0]))
 
     def _on_set_parameters(self, params: list[Parameter]) -> SetParametersResult:
         trial = dict(self._values)
@@ -167,12 +188,15 @@ class PlaneNode(Node):
             spec = PARAMETERS_BY_NAME.get(param.name)
             if spec is None:
                 return SetParametersResult(successful=False,
-                                           reason=f'unknown parameter {param.name!r}')
+                                           reason=unknown_parameter_message(param.name))
             if param.name in READ_ONLY:
                 return SetParametersResult(
                     successful=False, reason=f'{param.name!r} only takes effect at start-up')
+            value = _plain(param.value)
+            if value is None and isinstance(spec.default, list):
+                value = []   # unset again: back to the default, empty
             try:
-                trial[param.name] = check_value(spec, _plain(param.value))
+                trial[param.name] = check_value(spec, value)
             except ConfigError as err:
                 return SetParametersResult(successful=False, reason=str(err))
         try:
@@ -191,9 +215,9 @@ class PlaneNode(Node):
         self._qos_warned.add(side)
         wanted = 'reliable' if self.config.transport.reliable else 'best effort'
         self.get_logger().warning(
-            f'{side}/image_raw: a publisher offers QoS incompatible with this subscription '
-            f'({wanted}; policy id {getattr(info, "last_policy_kind", "?")}); no images will '
-            'arrive from it. Set qos.reliable to match the camera driver.')
+            f'{self.session.activity.topics[side]}: a publisher offers QoS incompatible with '
+            f'this subscription ({wanted}; policy id {getattr(info, "last_policy_kind", "?")}); '
+            'no images will arrive from it. Set qos.reliable to match the camera driver.')
 
     def _warn_input(self, message: str, key: str | None = None) -> None:
         """Log an input problem, throttled per kind of problem (``key``, or the message's)."""
@@ -213,19 +237,72 @@ class PlaneNode(Node):
         for pair in pairs:
             self.slot.put(pair)
 
+    def _on_camera_info(self, msg: CameraInfo) -> None:
+        """Narrow the prior from the left camera's K (once per distinct K)."""
+        try:
+            model = camera_model(msg)
+        except ValueError as err:
+            self._warn_input(f'{self.config.transport.camera_info_topic}: {err}; ignored, the '
+                             'prior stays as configured', key='camera_info')
+            return
+        key = (model.focal_px, *model.principal_px)
+        if self._camera_model is not None and np.allclose(key, self._camera_model, rtol=1e-6):
+            return
+        self._camera_model = key
+        tolerance = self.config.transport.camera_info_focal_tolerance
+        values = model.prior_values(tolerance)
+        configured = self.config.prior.focal_px
+        results = self.set_parameters([Parameter(name, value=value)
+                                       for name, value in values.items()])
+        failed = [r.reason for r in results if not r.successful]
+        if failed:
+            self.get_logger().error(f'camera_info not applied to the prior: {failed[0]}')
+            return
+        low, high = values['prior.focal_px']
+        note = ('' if configured[0] <= model.focal_px <= configured[1] else
+                f"; K's focal length is outside the configured [{configured[0]:g}, "
+                f'{configured[1]:g}]')
+        self.get_logger().info(
+            f'prior from camera_info: focal_px [{low:.1f}, {high:.1f}] (f {model.focal_px:.1f} '
+            f'+-{100 * tolerance:g} %), principal point ({model.principal_px[0]:.1f}, '
+            f'{model.principal_px[1]:.1f}){note}')
+
     def _on_joint_state(self, msg: JointState) -> None:
-        velocities = np.asarray(msg.velocity, dtype=np.float64)
-        velocities = velocities[np.isfinite(velocities)]
-        if velocities.size == 0:
+        velocities = np.abs(np.asarray(msg.velocity, dtype=np.float64))
+        finite = np.isfinite(velocities)
+        if not finite.any():
             return  # no velocities: no hint
-        self._joint_speed = (float(np.max(np.abs(velocities))), time.monotonic())
+        fastest = int(np.argmax(np.where(finite, velocities, -1.0)))
+        speed, now = float(velocities[fastest]), time.monotonic()
+        limit = self.config.head.max_joint_velocity
+        if speed > limit:
+            # A sensor fault or a unit mix-up, not a head this fast: flagged, never a hint.
+            name = msg.name[fastest] if fastest < len(msg.name) else f'#{fastest}'
+            self._implausible_joint = (speed, now)
+            self.implausible_joint_states += 1
+            self._warn_input(f'implausible head joint speed {format_number(speed, 3)} rad/s '
+                             f'(joint {wire_repr(name)}) > head.max_joint_velocity {limit:g}: '
+                             'ignored', key='implausible joint speed')
+            return
+        self._joint_speed = (speed, now)
 
     def joint_speed(self) -> float | None:
-        """Return the head's latest largest joint speed in rad/s, or None if none is recent."""
+        """Return the head's latest largest joint speed in rad/s, or None if none is recent.
+
+        Implausible speeds (above ``head.max_joint_velocity``) are never returned.
+        """
         latest = self._joint_speed
         if latest is None or time.monotonic() - latest[1] > self.config.head.max_age_s:
             return None
         return latest[0]
+
+    def _joint_values(self, values: list[tuple[str, str]]) -> list[tuple[str, str]]:
+        """Flag a recent implausible joint speed in the status values; add its count."""
+        flagged = self._implausible_joint
+        if flagged is not None and time.monotonic() - flagged[1] <= self.config.head.max_age_s:
+            text = f'implausible: {format_number(flagged[0], 3)} (ignored)'
+            values = [(key, text if key == JOINT_SPEED_KEY else value) for key, value in values]
+        return values + [('joint states implausible', str(self.implausible_joint_states))]
 
     # --- Processing ----------------------------------------------------------------------
     def _work(self) -> None:
@@ -233,6 +310,13 @@ class PlaneNode(Node):
             try:
                 self.process_pair(pair)
             except Exception as err:  # noqa: B902 - the worker must survive any one frame
+                if self._stopping or not self.context.ok():
+                    # Shutdown (Ctrl-C, SIGTERM, destroy_node) while a pair was in flight:
+                    # its outputs can no longer be published. Not an error.
+                    self.get_logger().info(
+                        'shutting down: the pair in flight (stamp '
+                        f'{pair.left_stamp_ns / 1e9:.3f} s) was cut short, nothing published')
+                    return
                 error = self.session.note_internal_error(err)
                 self.get_logger().error(f'frame failed: {error}',
                                         throttle_duration_sec=_THROTTLE_S)
@@ -269,6 +353,7 @@ class PlaneNode(Node):
         else:
             self._warn_input(f'no plane: {result.reason}',
                              key='no plane ' + problem_key(result.reason))
+        self._pub_result.publish(result_msg(header, self.get_fully_qualified_name(), frame))
         self._pub_mask.publish(image_msg(result.mask, header, 'mono8'))
         if self._pub_debug.get_subscription_count() > 0:
             rgb = debug_overlay(frame.left, result)
@@ -293,13 +378,17 @@ class PlaneNode(Node):
                 throttle_duration_sec=60.0)
         self._pub_diag.publish(diagnostics_msg(
             self.get_clock().now().to_msg(), STATUS_NAME, self.get_fully_qualified_name(),
-            level, message, values))
+            level, message, self._joint_values(values)))
 
     def stop_worker(self) -> None:
         """Stop the worker thread; pairs then wait in :attr:`slot` (see process_pending)."""
+        self._stopping = True
         self.slot.close()
         if self._worker.is_alive() and self._worker is not threading.current_thread():
             self._worker.join(timeout=5.0)
+            if self._worker.is_alive():
+                self.get_logger().info('shutting down: the pair in flight was cut short after '
+                                       '5 s, nothing more is published')
 
     def destroy_node(self) -> None:
         """Stop the worker thread, then destroy the node."""
@@ -317,12 +406,21 @@ def _plain(value: Any) -> Any:
 def main(args: list[str] | None = None) -> int:
     """Run plane_node until Ctrl-C or an external shutdown.
 
+    Args:
+        args: The command line (``sys.argv`` when None); ``-h`` or ``--help`` before
+            ``--ros-args`` prints the usage and the parameters and starts no node.
+
     Returns:
-        0 on a clean shutdown, 2 on an invalid parameter.
+        0 on a clean shutdown (Ctrl-C included) or after ``--help``, 2 on an invalid
+        parameter, parameters file or ROS argument (one line on stderr).
 
     """
-    rclpy.init(args=args)
+    if wants_help(sys.argv if args is None else args):
+        print(usage())
+        return 0
     try:
+        check_params_files(sys.argv if args is None else args)
+        init_rclpy(args)
         node = PlaneNode()
     except ConfigError as err:
         print(f'plane_node: {err}', file=sys.stderr)

@@ -40,6 +40,9 @@ SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidate
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
 _WIDE_BASIN_FACTOR = 4.0
+# Prior candidates (best screening energy first) refined as challengers beside the coarse
+# alignment's planes: the coarse flow misses floors that the prior's screening finds.
+CHALLENGE_PRIOR_CANDIDATES = 2
 
 
 @dataclass
@@ -350,6 +353,7 @@ class PlanePipeline:
         if not self._trust.challenge_due() or isinstance(problem, FailedEstimate):
             return
         pool = self._coarse_estimates(step, problem, feats, size)
+        pool += self._prior_estimates(problem, feats, size, CHALLENGE_PRIOR_CANDIDATES)
         best, verdict, _ = self._trust.pick(step.left, step.right, pool,
                                             self.config.features.roi)
         if best is not None and verdict is not None and self._trust.beats(verdict, lock):
@@ -364,6 +368,20 @@ class PlanePipeline:
         for start in self._trust.coarse_candidates(step.left, step.right):
             result = problem.estimate(start, self.config.estimator)
             if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
+                out.append(result)
+        return out
+
+    def _prior_estimates(self, problem: TwoStep, feats: Features, size: tuple[int, int],
+                         count: int) -> list[PlaneEstimate]:
+        """Return the refined, unrejected planes of the ``count`` best-screened candidates."""
+        prior_search = PriorSearch(problem, self._candidates(size),
+                                   self.config.prior.screen_threshold_px)
+        out = []
+        for index in prior_search.ranked()[:count]:
+            result, _ = prior_search.refine(
+                [index], self.config.estimator,
+                lambda estimate: self._checks.rejection_reason(estimate, feats, size))
+            if result is not None and result.ok:
                 out.append(result)
         return out
 

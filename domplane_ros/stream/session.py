@@ -28,7 +28,7 @@ from typing import Any, Callable
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import PlaneEstimate
 from domplane_ros.core.image import message_to_gray
-from domplane_ros.errors import ImageDecodeError
+from domplane_ros.errors import clip_text, ImageDecodeError
 from domplane_ros.stream.health import homography_problem, InputCounts, StampChecks
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 from domplane_ros.stream.status import plane_status
@@ -39,6 +39,9 @@ import numpy as np
 LATENCY_WINDOW = 200
 SIDES: tuple[Side, Side] = ('left', 'right')
 DEFAULT_TOPICS = ('/left/image_raw', '/right/image_raw')
+# The status's 'last error' (and the node's log of it) holds at most this many characters;
+# strings from the wire in it are clipped further where the error is made.
+LAST_ERROR_CHARS = 300
 
 
 @dataclass
@@ -282,7 +285,7 @@ class StreamSession:
         self.counters.decode_errors += 1
         self.counters.consecutive_failures += 1
         self.counts.add('decode_' + err.kind)
-        self.last_error = f'image rejected: {err}'
+        self.last_error = clip_text(f'image rejected: {err}', LAST_ERROR_CHARS)
         self.last_decode_error = err
         self.last_result = None
 
@@ -302,13 +305,13 @@ class StreamSession:
     def note_internal_error(self, err: BaseException) -> str:
         """Count a pair whose processing raised; return the error as the status shows it."""
         self.counters.internal_errors += 1
-        self.last_error = f'{type(err).__name__}: {err}'
+        self.last_error = clip_text(f'{type(err).__name__}: {err}', LAST_ERROR_CHARS)
         return self.last_error
 
     def note_undecodable(self, error: str) -> None:
         """Count a message that could not be deserialised (it never reaches the pairing)."""
         self.counters.undecodable_messages += 1
-        self.last_error = error
+        self.last_error = clip_text(error, LAST_ERROR_CHARS)
 
     def status(self, now: float, rate: float | None = None, dropped_busy: int = 0,
                joint_speed: float | None = None) -> tuple[int, str, list[tuple[str, str]]]:

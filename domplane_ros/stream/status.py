@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any, Mapping, Sequence
 
@@ -13,6 +14,7 @@ OK, WARN, ERROR = 0, 1, 2
 STATUS_NAME = 'plane_node: dominant plane'
 # Level ERROR after this many pairs in a row without a plane.
 FAILURES_FOR_ERROR = 3
+JOINT_SPEED_KEY = 'head joint speed [rad/s]'
 
 
 def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, processed: int,
@@ -60,7 +62,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         level = max(level, WARN)
         message += f'; {input_warning}'
     values = [
-        ('input rate [pairs/s]', f'{rate:.2f}'),
+        ('input rate [pairs/s]', format_number(rate)),
         *_latency_values(latencies_ms),
         ('pairs', pairs),
         ('processed pairs', processed),
@@ -76,12 +78,34 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
     return level, message, [(key, str(value)) for key, value in values]
 
 
+def format_number(value: float, decimals: int = 2) -> str:
+    """Format a diagnostics number: fixed decimals up to 1e6, else 4 significant digits.
+
+    A value from the wire (a joint velocity of 1e308, a stamp years off) stays short:
+    ``format_number(1e308)`` is ``'1.000e+308'``, not 309 digits.
+
+    Args:
+        value: The number.
+        decimals: Decimals below 1e6.
+
+    Returns:
+        The text (``'nan'``, ``'inf'`` or ``'-inf'`` for non-finite values).
+
+    """
+    value = float(value)
+    if not math.isfinite(value):
+        return str(value)
+    if abs(value) >= 1e6:
+        return f'{value:.3e}'
+    return f'{value:.{decimals}f}'
+
+
 def _camera_values(cameras: Sequence[tuple[str, int, float, float]]) -> list[tuple[str, Any]]:
     values: list[tuple[str, Any]] = []
     for topic, received, camera_rate, age in cameras:
         values += [(f'{topic} images received', received),
-                   (f'{topic} rate [images/s]', f'{camera_rate:.2f}'),
-                   (f'{topic} last image age [s]', f'{age:.2f}')]
+                   (f'{topic} rate [images/s]', format_number(camera_rate)),
+                   (f'{topic} last image age [s]', format_number(age))]
     return values
 
 
@@ -96,7 +120,7 @@ def _level_and_message(rate: float, consecutive_failures: int, result: Any, reas
     silent = [(topic, age) for topic, _, _, age in cameras if age > silence_s]
     if silent:
         return WARN, 'no images on ' + ', '.join(
-            f'{topic} for {age:.1f} s' for topic, age in silent)
+            f'{topic} for {format_number(age, 1)} s' for topic, age in silent)
     if rate == 0.0:
         return WARN, 'no stereo pairs received'
     if consecutive_failures >= FAILURES_FOR_ERROR:
@@ -108,8 +132,8 @@ def _level_and_message(rate: float, consecutive_failures: int, result: Any, reas
 
 def _latency_values(latencies_ms: Sequence[float]) -> list[tuple[str, str]]:
     lat = np.asarray(latencies_ms, dtype=np.float64) if len(latencies_ms) else np.zeros(1)
-    return [('processing latency median [ms]', f'{np.median(lat):.2f}'),
-            ('processing latency p95 [ms]', f'{np.percentile(lat, 95):.2f}')]
+    return [('processing latency median [ms]', format_number(np.median(lat))),
+            ('processing latency p95 [ms]', format_number(np.percentile(lat, 95)))]
 
 
 def _result_values(result: Any, joint_speed: float | None) -> list[tuple[str, Any]]:
@@ -123,8 +147,43 @@ def _result_values(result: Any, joint_speed: float | None) -> list[tuple[str, An
         ('warm start', (result.warm_start or 'none') if result is not None else 'none'),
         ('plane confidence', f'{result.confidence:.2f}' if ok else '0.00'),
         ('prior candidates (last frame)', result.candidates if result is not None else 0),
-        ('head joint speed [rad/s]', 'n/a' if joint_speed is None else f'{joint_speed:.3f}'),
+        (JOINT_SPEED_KEY, 'n/a' if joint_speed is None else format_number(joint_speed, 3)),
         ('inliers', result.n_inliers if result is not None else 0),
         ('final energy', f'{result.estimate.final_energy:.4g}' if ok else 'n/a'),
         ('converged', bool(ok and result.estimate.converged)),
     ]
+
+
+RESULT_STATUS_NAME = 'plane'
+"""``DiagnosticStatus.name`` of the per-pair result (``plane/result``)."""
+
+
+def result_status(frame: Any) -> tuple[int, str, list[tuple[str, str]]]:
+    """Return the per-pair result's level, message and values (``plane/result``).
+
+    The level is OK with a published plane, WARN without; the message is the lock state
+    (and the reason when there is no plane). The values, all strings: ``state`` (locked,
+    tracking, searching), ``plane`` (true or false), ``confidence`` (0 to 1; 0 without a
+    plane), ``homography`` (a JSON list of the 9 row-major values of H, left pixel to right
+    pixel with ``H[2][2] = 1``; ``[]`` without a plane) and ``reason`` ('' with a plane).
+
+    Args:
+        frame: A :class:`~domplane_ros.stream.session.ProcessedPair` (``result``,
+            ``publishable``).
+
+    Returns:
+        ``(level, message, values)``; the node and the replay build their message from it.
+
+    """
+    result = frame.result
+    plane = bool(frame.publishable)
+    values = ([float(v) for v in np.asarray(result.homography, dtype=np.float64).ravel()]
+              if plane else [])
+    reason = '' if plane else (result.reason or 'homography not finite')
+    message = result.state if plane else f'{result.state}: {reason}'
+    return (OK if plane else WARN, message, [
+        ('state', result.state),
+        ('plane', 'true' if plane else 'false'),
+        ('confidence', repr(float(result.confidence) if plane else 0.0)),
+        ('homography', json.dumps(values)),
+        ('reason', reason)])

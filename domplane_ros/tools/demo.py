@@ -31,6 +31,7 @@ from typing import Any, Sequence
 
 import cv2
 from domplane_ros.config import load_params_file, PlaneNodeConfig
+from domplane_ros.core.legend import legend_strip, text_strip
 from domplane_ros.core.mask import overlay
 from domplane_ros.errors import BagError, ConfigError
 from domplane_ros.replay.cli import run_replay
@@ -53,11 +54,6 @@ DEFAULT_SEED = 28
 _SHEET_TILES = 12
 _SHEET_COLS = 4
 _TRUTH_STRIDE_PX = 4
-
-_WHITE = (255, 255, 255)
-_GREY = (40, 40, 40)
-_LEGEND = (((0, 200, 0), 'floor (plane)'), ((230, 0, 0), 'obstacle'),
-           ((0, 255, 255), 'o inlier corner'), ((255, 0, 255), 'x outlier corner'))
 
 
 @dataclass
@@ -154,7 +150,7 @@ def _points(frame: DemoFrame) -> tuple[np.ndarray | None, np.ndarray | None]:
 
 
 def overlay_rgb(frame: DemoFrame) -> np.ndarray:
-    """Return the (H, W, 3) RGB overlay of a frame: mask tint, inlier and outlier corners."""
+    """Return the (H, W, 3) RGB overlay of a frame: mask tint, matched and unmatched corners."""
     inliers, outliers = _points(frame)
     return overlay(frame.replayed.left, frame.replayed.result.mask, inliers, outliers)
 
@@ -163,35 +159,9 @@ def frame_label(frame: DemoFrame) -> str:
     """Return the one-line label of a frame: index, error vs truth (or why it failed)."""
     result = frame.replayed.result
     if not result.ok:
-        return f'frame {frame.index}: no plane ({result.reason[:40]})'
+        return f'frame {frame.index}: no plane ({result.reason})'
     return (f'frame {frame.index}: err {frame.transfer_error_px:.2f} px, '
-            f'{result.n_inliers} inliers')
-
-
-def _text_strip(width: int, height: int, text: str, scale: float = 0.5) -> np.ndarray:
-    strip = np.full((height, width, 3), _GREY, np.uint8)
-    thickness = 1 if scale < 0.7 else 2
-    (_, text_h), _ = cv2.getTextSize(text, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)
-    cv2.putText(strip, text, (8, (height + text_h) // 2), cv2.FONT_HERSHEY_SIMPLEX, scale,
-                _WHITE, thickness, cv2.LINE_AA)
-    return strip
-
-
-def _legend_strip(width: int, height: int, title: str, scale: float = 0.5) -> np.ndarray:
-    strip = _text_strip(width, height, title, scale)
-    thickness = 1 if scale < 0.7 else 2
-    (title_w, _), _ = cv2.getTextSize(title, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)
-    x = 8 + title_w + 24
-    for colour, name in _LEGEND:
-        (text_w, text_h), _ = cv2.getTextSize(name, cv2.FONT_HERSHEY_SIMPLEX, scale, thickness)
-        if x + text_w + 30 > width:
-            break
-        y0 = (height - text_h) // 2
-        cv2.rectangle(strip, (x, y0), (x + text_h, y0 + text_h), colour, -1)
-        cv2.putText(strip, name, (x + text_h + 6, y0 + text_h), cv2.FONT_HERSHEY_SIMPLEX,
-                    scale, _WHITE, thickness, cv2.LINE_AA)
-        x += text_h + 6 + text_w + 20
-    return strip
+            f'{result.n_inliers} matched')
 
 
 def contact_sheet(frames: Sequence[DemoFrame], tiles: int = _SHEET_TILES,
@@ -216,8 +186,12 @@ def contact_sheet(frames: Sequence[DemoFrame], tiles: int = _SHEET_TILES,
         height, width = rgb.shape[:2]
         tile_height = int(round(height * tile_width / width))
         small = cv2.resize(rgb, (tile_width, tile_height), interpolation=cv2.INTER_AREA)
-        cells.append(np.vstack([_text_strip(tile_width, 24, frame_label(frames[k]), 0.45),
-                                small]))
+        cells.append((text_strip(tile_width, frame_label(frames[k]), 0.45, min_height=24),
+                      small))
+    # Every label in full: a long one wraps, and every label strip of the sheet grows with it.
+    label_h = max(label.shape[0] for label, _ in cells)
+    cells = [np.vstack([np.pad(label, ((0, label_h - label.shape[0]), (0, 0), (0, 0)),
+                               mode='edge'), small]) for label, small in cells]
     blank = np.full_like(cells[0], 255)
     rows = []
     for start in range(0, len(cells), cols):
@@ -226,8 +200,7 @@ def contact_sheet(frames: Sequence[DemoFrame], tiles: int = _SHEET_TILES,
         rows.append(np.hstack([np.pad(c, ((2, 2), (2, 2), (0, 0)), constant_values=255)
                                for c in row]))
     sheet = np.vstack(rows)
-    title = _legend_strip(sheet.shape[1], 34, 'domplane_ros demo: left images, mask overlay',
-                          0.55)
+    title = legend_strip(sheet.shape[1], 'domplane_ros demo: left images, mask overlay', 0.55)
     return np.vstack([title, sheet])
 
 
@@ -236,14 +209,14 @@ def big_overlay(frame: DemoFrame) -> np.ndarray:
     rgb = overlay_rgb(frame)
     width = rgb.shape[1]
     scale = 0.6 if width >= 600 else 0.45
-    top = _legend_strip(width, 30, 'dominant plane', scale * 0.85)
+    top = legend_strip(width, 'dominant plane', scale * 0.85)
     result = frame.replayed.result
     caption = frame_label(frame)
     if result.ok:
         caption = (f'frame {frame.index}: transfer error {frame.transfer_error_px:.2f} px vs '
-                   f'truth; {result.n_inliers} of {result.left_points.shape[0]} corners on '
-                   'the plane')
-    return np.vstack([top, rgb, _text_strip(width, 30, caption, scale * 0.8)])
+                   f'truth; {result.n_inliers} of {result.left_points.shape[0]} corners '
+                   'matched on the plane')
+    return np.vstack([top, rgb, text_strip(width, caption, scale * 0.8, min_height=30)])
 
 
 def energy_inliers_figure(frames: Sequence[DemoFrame], path: Path) -> None:

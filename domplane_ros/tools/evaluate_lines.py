@@ -340,8 +340,8 @@ def contact_sheet(path: Path, cases: Sequence[LineCase]) -> None:
             ax.set_title(f'{case.scene_class} {case.pair}, {METHOD_NAMES[method]}: '
                          f'{_fmt_px(case.errors[method])} px, {case.inliers[method]} inliers',
                          fontsize=9)
-    fig.suptitle('green = plane, red = obstacle; cyan = inlier corners (o) and segments, '
-                 'magenta = outliers', fontsize=10)
+    fig.suptitle('green = plane, red = obstacle; cyan = corners (o) and segments matched on '
+                 'the plane, magenta = unmatched', fontsize=10)
     fig.tight_layout(rect=(0, 0, 1, 1 - 0.4 / (3.3 * len(shown) + 0.5)))
     fig.savefig(path, dpi=80)
     plt.close(fig)

@@ -34,19 +34,15 @@ from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
 from domplane_ros.tools.common import (add_size_arguments, machine_name, ONE_THREAD_ENV,
-                                       prior_around, rss_mb, tool_parser)
+                                       rss_mb, tool_parser)
 import numpy as np
 
 
 def _params_file(frame: StereoFrame, directory: str, period_s: float, slop_s: float,
                  depth: int) -> str:
-    prior = prior_around(frame.setup)
-    text = ('plane_node:\n  ros__parameters:\n'
-            f'    prior.focal_px: [{prior.focal_px[0]}, {prior.focal_px[1]}]\n'
-            f'    prior.baseline_over_height: [{prior.baseline_over_height[0]}, '
-            f'{prior.baseline_over_height[1]}]\n'
-            f'    prior.tilt_deg: [{prior.tilt_deg[0]}, {prior.tilt_deg[1]}]\n'
-            f'    prior.vergence_deg: [{prior.vergence_deg[0]}, {prior.vergence_deg[1]}]\n'
+    # The documented default prior: nothing set from the rendered set-up's truth.
+    del frame
+    text = ('/**:\n  ros__parameters:\n'
             f'    diagnostics.period_s: {period_s}\n'
             # Stamps 10 ms apart at 100 Hz: a slop below half the period, so a frame whose
             # partner was lost is never paired with the next frame's partner.

@@ -29,7 +29,7 @@ from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
 from domplane_ros.tools.common import (add_size_arguments, machine_name, mono8_message,
-                                       one_core, prior_around, progress, rss_mb, tool_parser)
+                                       one_core, progress, rss_mb, tool_parser)
 import numpy as np
 
 BAD_KINDS = ('bad_encoding', 'black', 'other_size', 'stamp_back', 'gap')
@@ -117,7 +117,8 @@ def run(args: argparse.Namespace) -> int:
     print(f'machine: {machine_name()}')
     frames, small = _render(args)
     order = list(range(len(frames))) + list(range(len(frames) - 2, 0, -1))
-    session = ReplaySession(PlaneNodeConfig(prior=prior_around(frames[0].setup)))
+    # The documented default prior: nothing set from the rendered set-up's truth.
+    session = ReplaySession(PlaneNodeConfig())
     soak = _Soak(args.pairs)
     stamp = 1_700_000_000_000_000_000
     gc.collect()

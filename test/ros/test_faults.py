@@ -136,6 +136,7 @@ def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
             assert time.monotonic() < deadline, 'no lock before the drop-out'
             rig.stream(scene, 0.3, 20.0)
         resets_before = rig.node.pipeline.stats.resets
+        t_locked = time.monotonic()
 
         # The right camera stops; the left one goes on.
         t_stop = time.monotonic()
@@ -169,7 +170,12 @@ def test_camera_dropout_is_reported_then_the_node_relocks(ros_context, scene):
             assert left_ns >= stamp_back_ns - 50_000_000
             assert abs(left_ns - right_ns) <= 10_000_000
         # The gap (> pipeline.max_stamp_jump_s) dropped the warm start; the plane was found again.
-        assert rig.node.pipeline.stats.resets == resets_before + 1
+        # Every reset since the lock is a processed stamp jumping more than 1 s (the gap, and on
+        # a loaded machine a slow search can leave another such jump between processed pairs).
+        jumps = [(a, b) for (_, a, _), (t, b, _) in zip(processed_pairs, processed_pairs[1:])
+                 if t >= t_locked and b - a > 1_000_000_000]
+        assert any(a < stamp_stop_ns <= b for a, b in jumps), (stamp_stop_ns, jumps)
+        assert rig.node.pipeline.stats.resets == resets_before + len(jumps)
         assert _transfer_error_px(rig.homographies[-1][1].reshape(3, 3), scene) < 1.0
     finally:
         rig.close()
@@ -242,8 +248,11 @@ def test_100hz_load_keeps_queues_bounded_newest_wins_and_counts_drops(
         latency_s = np.array([t - (m.header.stamp.sec + 1e-9 * m.header.stamp.nanosec)
                               for t, m in rig.masks])
         assert latency_s.size >= counters.processed - 5
-        assert np.median(latency_s) < 0.3 and latency_s.max() < 1.0, (
-            np.median(latency_s), latency_s.max())
+        # The first mask waits for the cold prior search (the documented default prior, its
+        # real cost); after it, latency is queueing only.
+        assert latency_s[0] < 2.0, latency_s[0]
+        assert np.median(latency_s) < 0.3 and latency_s[1:].max() < 1.0, (
+            np.median(latency_s), latency_s[1:].max())
 
         # Still correct afterwards, at full speed.
         node.pipeline.process = real_process

@@ -51,6 +51,8 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
         homographies: list[Float64MultiArray] = []
         masks: list[Image] = []
         diagnostics: list[DiagnosticArray] = []
+        results: list[DiagnosticArray] = []
+        driver.create_subscription(DiagnosticArray, 'plane/result', results.append, 10)
         driver.create_subscription(Float64MultiArray, 'plane/homography',
                                    homographies.append, 10)
         driver.create_subscription(Image, 'plane/mask', masks.append, 10)
@@ -88,7 +90,8 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
         expected_h = [f.result.homography for f in replayed if f.result.ok]
         spin_until(lambda: len(homographies) >= len(expected_h)
                    and diagnostics and diagnostics[-1].status[0].values
-                   and node.session.counters.processed == N_FRAMES, 5.0)
+                   and node.session.counters.processed == N_FRAMES
+                   and len(results) == N_FRAMES, 5.0)
         spin_until(lambda: False, 0.3)   # anything late would show up as an extra message
     finally:
         executor.shutdown()
@@ -104,6 +107,15 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
     assert len(homographies) == len(expected_h)
     for msg, h in zip(homographies, expected_h):
         assert np.allclose(np.array(msg.data).reshape(3, 3), h, rtol=0, atol=1e-9)
+    # The stamped result of every pair: the same stamps, state, confidence and homography.
+    replay_results = read_bag(tmp_path / 'out')['messages']['/plane/result']
+    assert [stamp for stamp, _ in replay_results] == mask_stamps()
+    for live, (stamp, offline) in zip(results, replay_results):
+        assert live.header.stamp.sec * 10**9 + live.header.stamp.nanosec == stamp
+        assert live.header.frame_id == offline.header.frame_id
+        assert ([(kv.key, kv.value) for kv in live.status[0].values]
+                == [(kv.key, kv.value) for kv in offline.status[0].values])
+        assert live.status[0].level == bytes([offline.status[0].level])
     # The replay's diagnostics carry the node's keys.
     node_keys = [kv.key for kv in diagnostics[-1].status[0].values]
     replay_diag = read_bag(tmp_path / 'out')['messages']['/diagnostics'][-1][1]

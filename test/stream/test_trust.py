@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import PlaneNodeConfig, VerificationSettings
+from domplane_ros.core.estimator import estimate_plane
+from domplane_ros.core.features import detect_corners
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import cut_sequence, plane_error_px, RigError, rough_rig, swapped
 from domplane_ros.stream import trust as trust_module
@@ -116,3 +118,59 @@ def test_a_challenger_needs_clearly_more_than_the_lock(scene):
     assert gate.beats(scored(1.3 * lock.score), lock)
     assert not gate.beats(trust_module.Verdict(False, scored(2 * lock.score).verification,
                                                'refused'), lock)
+
+
+# A gate low enough that a plane 2 px off the truth still passes (score about 0.16 against
+# 0.28 for the truth on this scene): two verified planes, one clearly better.
+LOW_GATE = VerificationSettings(min_score=0.12)
+
+
+def _estimate_at(scene, homography):
+    estimate = estimate_plane(*_corners(scene), init=scene.homography)
+    assert estimate.ok
+    return replace(estimate, homography=homography)
+
+
+def _corners(scene):
+    cfg = PlaneNodeConfig().features
+    return detect_corners(scene.left, cfg), detect_corners(scene.right, cfg)
+
+
+def test_pick_ranks_verified_planes_by_score_in_any_order(scene):
+    gate = TrustGate(LOW_GATE)
+    worse = _shifted(scene.homography, 2.0)
+    assert gate.judge(scene.left, scene.right, worse).accepted
+    true, off = _estimate_at(scene, scene.homography), _estimate_at(scene, worse)
+    for order in ([true, off], [off, true]):
+        best, verdict, reason = gate.pick(scene.left, scene.right, order)
+        assert best is not None and reason == ''
+        # Fails if the ranking is inverted (the worst verified plane picked).
+        assert plane_error_px(scene, best.homography) < 0.5, order
+
+
+@pytest.mark.parametrize('period', [3, 0])
+def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatch, period):
+    settings = replace(LOW_GATE, challenge_period=period)
+    pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
+    stamp = 0
+    for _ in range(3):
+        result = pipeline.process(scene.left, scene.right, stamp)
+        stamp += PERIOD_NS
+    assert result.ok and plane_error_px(scene, result.homography) < 1.0
+    # From now on the warm start is stuck 2 px off (as in a look-alike's basin): only the
+    # challenger can bring the lock back.
+    worse = _shifted(scene.homography, 2.0)
+    stuck = _estimate_at(scene, worse)
+    monkeypatch.setattr(pipeline, '_warm_estimate', lambda *args: stuck)
+    errors, starts = [], []
+    for _ in range(4):
+        result = pipeline.process(scene.left, scene.right, stamp)
+        stamp += PERIOD_NS
+        assert result.ok
+        errors.append(plane_error_px(scene, result.homography))
+        starts.append(result.warm_start)
+    if period:
+        assert 'challenger' in starts and min(errors) < 1.0, (starts, errors)
+    else:
+        # Fails if the challenger runs although it is switched off.
+        assert 'challenger' not in starts and min(errors) > 1.5, (starts, errors)

@@ -42,8 +42,8 @@ def contact_sheet(path: Path, cases: Sequence[Case], title: str = '') -> None:
         ax.imshow(overlay(case.left, mask, ours.inlier_points, ours.outlier_points))
         ax.set_axis_off()
         ax.set_title(_case_label(case), fontsize=8)
-    fig.suptitle(title or 'ours: green = plane, red = obstacle, cyan o = inlier corner, '
-                 'magenta x = outlier corner', fontsize=10)
+    fig.suptitle(title or 'ours: green = plane, red = obstacle, cyan o = corner matched on '
+                 'the plane, magenta x = unmatched corner', fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
