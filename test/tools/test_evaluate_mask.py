@@ -1,4 +1,4 @@
-"""evaluate_mask: the residual-parallax mask against the NCC mask, KITTI with the issue's labels."""
+"""evaluate_mask: the parallax mask against the NCC mask; KITTI with the issue's labels."""
 
 from __future__ import annotations
 
