@@ -35,6 +35,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
+from typing import Sequence
 
 import cv2
 from domplane_ros.config import MaskConfig
@@ -166,8 +167,8 @@ def _check_focal(focal_px: tuple[float, float]) -> tuple[float, float]:
 
 
 def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                  config: MaskConfig, focal_px: tuple[float, float] = DEFAULT_FOCAL_PX
-                  ) -> ParallaxMask:
+                  config: MaskConfig, focal_px: tuple[float, float] = DEFAULT_FOCAL_PX,
+                  principal_point_px: Sequence[float] = ()) -> ParallaxMask:
     """Label every left pixel plane, obstacle or unknown by its residual parallax.
 
     See the module docstring for the measurement and the labels. Works at ``config.scale``:
@@ -181,6 +182,8 @@ def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
         config: Mask settings.
         focal_px: (min, max) focal length range of the prior (``prior.focal_px``), for the
             plane at infinity (:mod:`domplane_ros.core.parallax`).
+        principal_point_px: The prior's principal point (``prior.principal_point_px``), or
+            empty for the image centre.
 
     Returns:
         The :class:`ParallaxMask`: labels (H, W) uint8 and the residual parallax at the
@@ -211,7 +214,8 @@ def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     # is brought to the left image's size first.
     right_h, right_w = right.shape
     same_size = resize_homography(width / right_w, height / right_h) @ hom
-    shift_inf = infinity_shift(same_size, width, height, focal, (small_w, small_h))
+    shift_inf = infinity_shift(same_size, width, height, focal, (small_w, small_h),
+                               principal_point_px)
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config)
     _clean(labels, valid, decidable, int(config.morph_px))
     _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid)

@@ -231,7 +231,9 @@ class PlanePipeline:
         parallax = None
         if step.accepted:
             h = estimate.homography
-            out = parallax_mask(left, right, h, self.config.mask, self.config.prior.focal_px)
+            prior = self.config.prior
+            out = parallax_mask(left, right, h, self.config.mask, prior.focal_px,
+                                prior.principal_point_px)
             mask, parallax = out.labels, out.parallax
             self._last_h = h
             self._last_energy_per_point = estimate.final_energy / max(feats.n_left, 1)

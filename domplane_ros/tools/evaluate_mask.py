@@ -29,10 +29,11 @@ Data, each scored with the plane homography named in the table:
 * **time**: both masks at 640x480 on one core, median over ``R`` interleaved repetitions on
   the first rendered scenes.
 
-Writes ``mask_contact_sheet.png`` (left image; NCC mask; parallax mask; residual parallax,
-0-8 px, black where not measured) and ``mask_summary.txt`` (the tables) to ``--out``. CPU
-time is given beside wall-clock time because the machine may be shared: it counts only this
-process's work.
+With ``--readme-overlay FILE`` it also writes the README picture (right image, left image
+with the pipeline's debug overlay on a rendered scene). Writes ``mask_contact_sheet.png``
+(left image; NCC mask; parallax mask; residual parallax, 0-8 px, black where not measured)
+and ``mask_summary.txt`` (the tables) to ``--out``. CPU time is given beside wall-clock time
+because the machine may be shared: it counts only this process's work.
 """
 
 from __future__ import annotations
@@ -50,6 +51,8 @@ from domplane_ros.core.mask import (DEFAULT_FOCAL_PX, mask_scores, OBSTACLE, ove
                                     parallax_mask, ParallaxMask, PLANE)
 from domplane_ros.sim.generators import indoor_scene, random_scene
 from domplane_ros.sim.model import StereoFrame
+from domplane_ros.stream.frame import debug_overlay
+from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import (add_output_argument, machine_name, one_core, progress,
                                        tool_parser)
 from domplane_ros.tools.evaluation.datasets import KITTI_PRIOR, KITTI_ROI
@@ -61,6 +64,8 @@ from domplane_ros.tools.evaluation.tables import fmt, markdown_table
 import numpy as np
 
 HELD_OUT_FIRST_SEED = 1000
+# The README picture's rendered scene.
+README_SEED = 6
 INDOOR_FIRST_SEED = 0
 INDOOR_HELD_OUT_FIRST_SEED = 2000
 KITTI_LABEL_PX = 1.0
@@ -285,7 +290,26 @@ def summary(rendered: dict, indoor: dict, kitti: dict, times: dict[str, float],
                     + [times[name][key] for name in times])
     rows.append(['rendered', 'worst scene plane IoU', '-']
                 + [min(r['plane_iou'] for r in rendered[name]) for name in rendered])
-    return machine_name() + '\n\n' + markdown_table(header, rows) + '\n'
+    cells = [[f'{v:.3f}' if isinstance(v, float) else v for v in row] for row in rows]
+    return machine_name() + '\n\n' + markdown_table(header, cells) + '\n'
+
+
+def readme_overlay(path: Path, seed: int = README_SEED) -> None:
+    """Write the README picture: right image | left image with the pipeline's debug overlay.
+
+    The rendered scene :func:`~domplane_ros.sim.random_scene` ``seed`` goes through a
+    :class:`~domplane_ros.stream.pipeline.PlanePipeline` with the default configuration
+    (prior search, verification, mask), so the picture shows what the node publishes.
+    """
+    frame = random_scene(seed)
+    result = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 1)
+    if not result.ok:
+        raise RuntimeError(f'seed {seed}: no plane ({result.reason})')
+    rgb = debug_overlay(frame.left, result)
+    right = cv2.cvtColor(frame.right, cv2.COLOR_GRAY2RGB)
+    picture = cv2.resize(np.hstack([right, rgb]), None, fx=0.75, fy=0.75,
+                         interpolation=cv2.INTER_AREA)
+    cv2.imwrite(str(path), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -300,7 +324,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument('--data', type=Path, default=default_data_dir(),
                         help='folder holding kitti2015_000046/')
     add_output_argument(parser, 'mask_output', 'the contact sheet and the summary')
+    parser.add_argument('--readme-overlay', type=Path, default=None,
+                        help='also write the README picture (docs/overlay.png) to this file')
     args = parser.parse_args(argv)
+    if args.readme_overlay is not None:
+        readme_overlay(args.readme_overlay)
     first = HELD_OUT_FIRST_SEED if args.held_out else 0
     indoor_first = INDOOR_HELD_OUT_FIRST_SEED if args.held_out else INDOOR_FIRST_SEED
     sheet: list = []
