@@ -297,7 +297,12 @@ class PlaneNode(Node):
         return latest[0]
 
     def _joint_values(self, values: list[tuple[str, str]]) -> list[tuple[str, str]]:
-        """Flag a recent implausible joint speed in the status values; add its count."""
+        """Flag a recent implausible joint speed in the status values; add its count.
+
+        Without a joint topic the values stay the session's, as the replay writes them.
+        """
+        if self._joint_sub is None:
+            return values
         flagged = self._implausible_joint
         if flagged is not None and time.monotonic() - flagged[1] <= self.config.head.max_age_s:
             text = f'implausible: {format_number(flagged[0], 3)} (ignored)'

@@ -206,7 +206,6 @@ def test_help_prints_usage_and_parameters_without_starting_a_node(tmp_path, ros_
     typo_file.write_text('/**:\n  ros__parameters:\n    estimator.threshhold_px: 2.0\n')
     cases = {
         'help': (NODE + ['--help'], 0, None),
-        'help with ros args': (NODE + ['-h', '--ros-args', '-p', 'qos.depth:=3'], 0, None),
         '-p typo': (NODE + ['--ros-args', '-p', 'prior.focal:=[500.0, 600.0]'], 2,
                     "unknown parameter 'prior.focal' (did you mean 'prior.focal_px'?)"),
         'file typo': (NODE + ['--ros-args', '--params-file', str(typo_file)], 2,
