@@ -38,8 +38,11 @@ class CoarseConfig:
         max_forward_backward_px: Largest forward-backward flow disagreement kept, pixels at
             the working width.
         threshold_px: MAGSAC++ inlier threshold at the working width, pixels.
-        lower_parts: Top edges (fractions of the height) of the image parts a homography is
-            fitted to; 0.0 is the whole image.
+        lower_parts: Top edges (fractions of the height) of the image parts homographies
+            are fitted to; 0.0 is the whole image.
+        planes_per_part: Homographies fitted one after the other in each part, each to the
+            samples the previous ones left out (a box or a wall that dominates a part hides
+            the floor from the first fit only).
     """
 
     width_px: int = 320
@@ -48,7 +51,8 @@ class CoarseConfig:
     min_gradient: float = 20.0
     max_forward_backward_px: float = 0.5
     threshold_px: float = 1.0
-    lower_parts: tuple[float, ...] = (0.0, 0.5)
+    lower_parts: tuple[float, ...] = (0.0, 0.5, 0.7)
+    planes_per_part: int = 2
 
     def __post_init__(self) -> None:
         """Check the values.
@@ -65,6 +69,9 @@ class CoarseConfig:
             raise ValueError('step_px, threshold_px and max_forward_backward_px must be positive')
         if not all(0.0 <= part < 1.0 for part in self.lower_parts):
             raise ValueError(f'lower_parts must lie in [0, 1), got {self.lower_parts!r}')
+        if int(self.planes_per_part) != self.planes_per_part or self.planes_per_part < 1:
+            raise ValueError(f'planes_per_part must be an integer >= 1, got '
+                             f'{self.planes_per_part!r}')
 
 
 class CoarseAligner:
@@ -110,10 +117,15 @@ class CoarseAligner:
         out = []
         for top in cfg.lower_parts:
             keep = src[:, 1] >= top * small_l.shape[0]
-            h = _fit(src[keep], dst[keep], cfg.threshold_px)
-            if h is not None:
+            part_src, part_dst = src[keep], dst[keep]
+            for _ in range(cfg.planes_per_part):
+                fitted = _fit(part_src, part_dst, cfg.threshold_px)
+                if fitted is None:
+                    break
+                h, inliers = fitted
                 full = to_full @ h @ from_full
                 out.append(full / full[2, 2])
+                part_src, part_dst = part_src[~inliers], part_dst[~inliers]
         return np.stack(out) if out else np.zeros((0, 3, 3))
 
     def _samples(self, left: np.ndarray, right: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -150,12 +162,13 @@ def _gradient(image: np.ndarray) -> np.ndarray:
     return cv2.GaussianBlur(cv2.magnitude(gx, gy), (5, 5), 0)
 
 
-def _fit(src: np.ndarray, dst: np.ndarray, threshold_px: float) -> np.ndarray | None:
-    """Fit a homography robustly; None if too few samples or no model."""
+def _fit(src: np.ndarray, dst: np.ndarray, threshold_px: float
+         ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Fit a homography robustly: it and its (N,) bool inliers; None if too few or no model."""
     if src.shape[0] < 20:
         return None
-    h, _ = cv2.findHomography(src, dst, cv2.USAC_MAGSAC, threshold_px, maxIters=2000,
-                              confidence=0.999)
-    if h is None or not np.all(np.isfinite(h)) or abs(h[2, 2]) < 1e-12:
+    h, inliers = cv2.findHomography(src, dst, cv2.USAC_MAGSAC, threshold_px, maxIters=2000,
+                                    confidence=0.999)
+    if h is None or not np.all(np.isfinite(h)) or abs(h[2, 2]) < 1e-12 or inliers is None:
         return None
-    return h
+    return h, inliers.ravel().astype(bool)

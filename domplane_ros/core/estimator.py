@@ -62,8 +62,16 @@ def _options(options: EstimatorConfig | None, overrides: dict[str, Any]) -> Esti
     return replace(base, **overrides) if overrides else base
 
 
+# Potentials whose scale is graduated (GNC): from ``gnc_start_px`` down to the threshold.
+# Graduating the truncated quadratic too widens its basin on point sets (0 % -> 95-100 %
+# converged from 20 px corner displacements, spread, clustered, half off-plane, 30 % missing,
+# sparse) but on rendered pairs its wide stages slide into periodic look-alikes (cold start
+# solved 73 % -> 47 %, planks 64 % -> 21 %, one run on seeds 0-29): not done.
+GRADUATED = ('geman_mcclure',)
+
+
 def gnc_scales(options: EstimatorConfig) -> list[float]:
-    """Return the scales (pixels) of the stages: one for most potentials, several for GNC.
+    """Return the scales (pixels) of the stages: one for convex potentials, several for GNC.
 
     Args:
         options: Estimator settings.
@@ -72,7 +80,7 @@ def gnc_scales(options: EstimatorConfig) -> list[float]:
         Decreasing scales ending at ``options.threshold_px``.
 
     """
-    if options.potential != 'geman_mcclure' or options.gnc_start_px <= options.threshold_px:
+    if options.potential not in GRADUATED or options.gnc_start_px <= options.threshold_px:
         return [options.threshold_px]
     scales = []
     s = options.gnc_start_px

@@ -59,7 +59,7 @@ def random_plane_homography(rng: np.random.Generator, width: int = 640,
 def point_scene(rng: np.random.Generator, n_points: int = 500, outlier_fraction: float = 0.3,
                 missing_fraction: float = 0.1, noise_px: float = 0.3,
                 homography: np.ndarray | None = None, width: int = 640,
-                height: int = 480) -> PointScene:
+                height: int = 480, clusters: int = 0) -> PointScene:
     """Draw a point scene.
 
     Args:
@@ -72,16 +72,20 @@ def point_scene(rng: np.random.Generator, n_points: int = 500, outlier_fraction:
         homography: True homography; drawn with :func:`random_plane_homography` if None.
         width: Image width.
         height: Image height.
+        clusters: 0 spreads the left points uniformly over the image; else they are drawn
+            around this many centres (Gaussian, 40 px standard deviation), as corners gather
+            on a few textured objects.
 
     Returns:
         The :class:`PointScene`.
 
     """
     h = random_plane_homography(rng, width, height) if homography is None else homography
+    centres = rng.uniform([0, 0], [width - 1, height - 1], size=(clusters, 2))
     # Left points whose plane image lands inside the right image.
     pts = np.empty((0, 2))
     while pts.shape[0] < n_points:
-        cand = rng.uniform([0, 0], [width - 1, height - 1], size=(2 * n_points, 2))
+        cand = _draw_left(rng, 2 * n_points, width, height, centres)
         mapped = apply_homography(h, cand)
         inside = ((mapped[:, 0] >= 0) & (mapped[:, 0] <= width - 1)
                   & (mapped[:, 1] >= 0) & (mapped[:, 1] <= height - 1))
@@ -103,6 +107,18 @@ def point_scene(rng: np.random.Generator, n_points: int = 500, outlier_fraction:
     right = right[rng.permutation(right.shape[0])]
     return PointScene(left=left[keep_left], right=right, homography=h,
                       on_plane=on_plane[keep_left], width=width, height=height)
+
+
+def _draw_left(rng: np.random.Generator, count: int, width: int, height: int,
+               centres: np.ndarray) -> np.ndarray:
+    """Return (count, 2) left points inside the image: uniform, or around ``centres``."""
+    if centres.shape[0] == 0:
+        return rng.uniform([0, 0], [width - 1, height - 1], size=(count, 2))
+    around = centres[rng.integers(0, centres.shape[0], count)]
+    pts = around + rng.normal(0.0, 40.0, (count, 2))
+    inside = ((pts[:, 0] >= 0) & (pts[:, 0] <= width - 1)
+              & (pts[:, 1] >= 0) & (pts[:, 1] <= height - 1))
+    return pts[inside]
 
 
 def displace_homography(homography: np.ndarray, displacement_px: float,
