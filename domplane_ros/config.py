@@ -110,10 +110,12 @@ class MaskConfig(_Section):
     section: ClassVar[str] = 'mask'
 
     scale: float = 0.5
-    window_px: int = 7
-    ncc_threshold: float = 0.8
+    window_px: int = 5
+    ncc_threshold: float = 0.7
     min_texture: float = 3.0
     morph_px: int = 5
+    parallax_threshold_px: float = 1.0
+    min_obstacle_height: float = 0.1
 
 
 @dataclass(frozen=True)

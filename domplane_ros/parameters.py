@@ -152,14 +152,24 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     # Mask.
     ParamSpec('mask.scale', 0.5, 'float',
               'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),
-    ParamSpec('mask.window_px', 7, 'int',
-              'Side of the window of the normalised comparison, pixels at mask scale.', 3, 31),
-    ParamSpec('mask.ncc_threshold', 0.8, 'float',
-              'Local normalised correlation above which a pixel is on the plane.', -1.0, 1.0),
+    ParamSpec('mask.window_px', 5, 'int',
+              'Side of the window of the residual parallax estimate and the zero-shift '
+              'correlation, pixels at mask scale.', 3, 31),
+    ParamSpec('mask.ncc_threshold', 0.7, 'float',
+              'Zero-shift normalised correlation (right image warped by the plane) a window '
+              'needs for its residual parallax to be measured; below 0.5 a textured window '
+              'is off the plane.', 0.5, 1.0),
     ParamSpec('mask.min_texture', 3.0, 'float',
               'Local grey-level standard deviation below which a pixel is unknown.', 0.0, 255.0),
     ParamSpec('mask.morph_px', 5, 'int',
               'Size of the morphological clean-up, pixels at mask scale (0 disables).', 0, 51),
+    ParamSpec('mask.parallax_threshold_px', 1.0, 'float',
+              'Residual parallax after the plane warp (full-resolution pixels) below which a '
+              'pixel is plane and at or above which it is an obstacle.', 0.1, 50.0),
+    ParamSpec('mask.min_obstacle_height', 0.1, 'float',
+              'Smallest obstacle to detect, as its height over the camera height: pixels '
+              'where such an obstacle would show less than mask.parallax_threshold_px '
+              '(far away, small baseline, at or above the horizon) are unknown.', 0.01, 0.9),
     # Pipeline.
     ParamSpec('pipeline.max_energy_ratio', 4.0, 'float',
               'A warm-started estimate whose energy per point exceeds this multiple of the '

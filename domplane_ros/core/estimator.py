@@ -200,7 +200,8 @@ class TwoStep:
             if ext is not None:
                 h_new = ext[0]
             pred_new = self.apply(h_new)
-            r, idx, aux_new, pen_new, terms_new, closest = self.local_step(pred_new, potential)
+            r_new, idx_new, aux_new, pen_new, terms_new, closest_new = self.local_step(
+                pred_new, potential)
             # Step check: keep a previous auxiliary variable where it is cheaper under the
             # new H (per feature: a segment keeps both auxiliary endpoints or neither).
             diff = pred_new - aux
@@ -214,10 +215,15 @@ class TwoStep:
                 pen_new[keep_old] = penalty[keep_old]
                 terms_new = np.where(keep_old, old_terms, terms_new)
             energy_new = float(np.sum(terms_new))
+            if energy_new > energy * (1.0 + 1e-12):
+                # Both steps lower the energy in exact arithmetic; a near-degenerate fit (a
+                # handful of features) can break that numerically: the step is not taken.
+                return h, it, True, (pred, r, idx, closest)
             move = float(np.max(np.abs(pred_new - pred))) if pred.size else 0.0
             energies.append(energy_new)
             decrease = energy - energy_new
             h, pred, aux, penalty, energy = h_new, pred_new, aux_new, pen_new, energy_new
+            r, idx, closest = r_new, idx_new, closest_new
             if move < options.tolerance_px or decrease <= options.energy_tolerance * max(
                     energy, 1e-300):
                 return h, it, True, (pred, r, idx, closest)

@@ -19,7 +19,7 @@ LEGEND = ((PLANE_RGB, 'green tint: plane (floor)'),
           (OBSTACLE_RGB, 'red tint: off the plane (obstacle)'),
           (INLIER_RGB, 'cyan o: corner matched on the plane'),
           (OUTLIER_RGB, 'magenta x: unmatched corner'))
-UNKNOWN_NOTE = 'no tint: undecided (too little texture)'
+UNKNOWN_NOTE = 'no tint: unknown (no texture, not seen, too far or above the horizon)'
 
 _FONT = cv2.FONT_HERSHEY_SIMPLEX
 _WHITE = (255, 255, 255)

@@ -1,34 +1,74 @@
-"""Dense ground/obstacle mask from the plane homography, and its picture.
+"""Ground / obstacle / unknown mask from the residual parallax after the plane warp.
 
-:func:`plane_mask` warps the right image into the left view with the plane homography and
-compares the two with a local zero-mean normalised cross-correlation (NCC), computed with box
-filters. NCC does not change under a gain and offset between the cameras. Where the floor is
-seen, the warped right image equals the left one and the NCC is high; on an obstacle the
-parallax the plane does not predict breaks the match. Windows with too little texture in
-either image, or reaching outside the right image, are unknown. The labels are cleaned by a
-small opening and closing, and unknown low-texture regions enclosed by floor (the plain
-interior of a tile, say) can be filled as floor.
+:func:`parallax_mask` warps the right image into the left view with the plane homography
+``H`` at ``config.scale`` and measures, per pixel, the **residual parallax**: the shift along
+the epipolar direction (the image x axis for the prior's head, see
+:mod:`domplane_ros.core.parallax`) that aligns the warped right image with the left one.
+Points on the plane have none; a point off the plane has parallax that grows with its height
+above the plane and falls with its distance. The shift is a dense one-step, one-dimensional
+Lucas-Kanade estimate at zero shift (box-filtered gradient products, gain and offset removed
+by the local means, regularised so that windows without texture across the epipolar direction
+fall back to zero), trusted up to one pixel at the working scale where the zero-shift
+normalised correlation (NCC) also holds; beyond that a clearly failed NCC says the pixel is off
+the plane without measuring by how much.
 
-Labels: :data:`PLANE` (255) on the dominant plane, :data:`OBSTACLE` (127) off it,
-:data:`UNKNOWN` (0) undecided.
+Three labels with a physical meaning:
+
+* :data:`PLANE` (255): measured residual parallax below ``config.parallax_threshold_px``
+  (full-resolution pixels), where an obstacle of ``config.min_obstacle_height`` (relative to
+  the camera height) would have shown at least that much;
+* :data:`OBSTACLE` (127): residual parallax at or above the threshold, from a point nearer than
+  infinity, below the horizon; or, where such an obstacle would show, a textured window whose
+  zero-shift NCC clearly fails;
+* :data:`UNKNOWN` (0): everything else: no texture, outside the right image, at or above the
+  plane's horizon (sky, far walls: no ground there to compare with), and far or
+  small-baseline views where an obstacle of the minimum height would not produce measurable
+  parallax.
+
+Obstacles are cleaned by a small opening and closing, plane gaps by a closing; unknown
+low-texture regions whose outline inside the right image is (almost) all plane, the plain
+interior of a tile, are filled as plane. The residual parallax itself is returned beside the
+labels.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 import math
+from typing import Sequence
 
 import cv2
 from domplane_ros.config import MaskConfig
 from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
+from domplane_ros.core.parallax import height_factor, infinity_shift
 import numpy as np
 
 PLANE = 255
 OBSTACLE = 127
 UNKNOWN = 0
+# Value of the parallax image where the residual parallax was not measured.
+NOT_MEASURED = -1.0
+# Default focal range (the default prior's) for the plane-at-infinity fit.
+DEFAULT_FOCAL_PX = (400.0, 900.0)
 
-# An unknown region is filled as plane when at least this share of its outline is plane.
+# The one-step estimate is linear in the shift up to about a pixel at the working scale.
+_LINEAR_RANGE_PX = 1.0
+# Zero-shift NCC below which a textured window is off the plane without a measured parallax.
+_REJECT_NCC = 0.5
+# Where an obstacle of the minimum height would not show, an obstacle needs this many times
+# the parallax threshold (the coarse flow is not trusted near it there).
+_FAR_FACTOR = 3.0
+# Regulariser of the one-step estimate, grey levels^2 per pixel^2 (windows without texture
+# across the epipolar direction fall back to zero shift).
+_REGULARISER = 2.0
+# An unknown region is filled as plane when at least this share of its outline inside the
+# right image is plane, and that outline has at least this many pixels.
 _FILL_OUTLINE_SHARE = 0.95
+_FILL_MIN_OUTLINE = 4
+# Working images smaller than twice this (pixels) get DIS at their own size, smaller than
+# it none.
+_DIS_MIN_SIZE = 32
 # Translucency of the overlay tint.
 _TINT_ALPHA = 0.35
 # Colours of :func:`overlay` (RGB); core/legend.py names them.
@@ -36,6 +76,28 @@ PLANE_RGB = (0, 255, 0)
 OBSTACLE_RGB = (255, 0, 0)
 INLIER_RGB = (0, 255, 255)
 OUTLIER_RGB = (255, 0, 255)
+
+
+@dataclass(frozen=True)
+class ParallaxMask:
+    """The mask of one pair and the residual parallax it was decided on.
+
+    Attributes:
+        labels: (H, W) uint8 left-image labels: 255 plane, 127 obstacle, 0 unknown.
+        parallax: (h, w) float32 residual parallax magnitude at the mask's working scale,
+            in full-resolution pixels; :data:`NOT_MEASURED` (-1) where it was not measured
+            (no texture, outside the right image, or too large for the one-step estimate).
+    """
+
+    labels: np.ndarray
+    parallax: np.ndarray
+
+    def parallax_image(self) -> np.ndarray:
+        """Return the (H, W) float32 parallax at the left image's size (nearest neighbour)."""
+        height, width = self.labels.shape
+        if self.parallax.shape == (height, width):
+            return self.parallax
+        return cv2.resize(self.parallax, (width, height), interpolation=cv2.INTER_NEAREST)
 
 
 def _resize(image: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
@@ -48,69 +110,94 @@ def _resize(image: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
     return small, resize_homography(new_w / width, new_h / height)
 
 
-def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray) -> None:
+def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray) -> None:
     """Label as plane, in place, fillable regions whose outline is (almost) all plane.
+
+    Only the outline inside the right image counts (the image border and pixels the right
+    camera does not see neither support nor oppose the fill), and it must have at least
+    :data:`_FILL_MIN_OUTLINE` pixels. The regions are found on every second pixel (plain
+    regions worth filling are large), and only fillable pixels change.
 
     Args:
         labels: (h, w) uint8 labels, changed in place.
-        fillable: (h, w) bool, unknown pixels that may become plane (low texture, but inside
-            the right image).
+        fillable: (h, w) bool, unknown pixels that may become plane.
+        valid: (h, w) bool, pixels inside the right image.
 
     """
-    count, components = cv2.connectedComponents(fillable.astype(np.uint8), connectivity=4)
-    if count <= 1:
+    coarse = fillable[::2, ::2].astype(np.uint8)
+    count, components = cv2.connectedComponents(coarse, connectivity=4)
+    if count <= 1 or count >= 65535:
         return
-    # Each outline pixel (next to a component, not in one) takes the largest neighbouring
-    # component id; pixels between two components are rare and only blur the vote.
-    grown = cv2.dilate(components.astype(np.float32), np.ones((3, 3), np.uint8)).astype(
-        np.int32)
-    outline = (grown > 0) & (components == 0)
-    ids = grown[outline]
-    is_plane = labels[outline] == PLANE
-    total = np.bincount(ids, minlength=count)
-    plane = np.bincount(ids, weights=is_plane, minlength=count)
-    # Regions touching the image border have part of their outline outside the image.
-    border = np.zeros(count, bool)
-    for edge in (components[0], components[-1], components[:, 0], components[:, -1]):
-        border[edge] = True
-    fill = (plane >= _FILL_OUTLINE_SHARE * np.maximum(total, 1)) & (total > 0) & ~border
+    # Each outline pixel (next to a component, not in one) votes for the largest and the
+    # smallest neighbouring component id (both, when it lies between two components).
+    ids = components.astype(np.uint16)
+    square = np.ones((3, 3), np.uint8)
+    largest = cv2.dilate(ids, square)
+    ids[ids == 0] = 65535
+    smallest = cv2.erode(ids, square)
+    outline = (largest > 0) & (components == 0) & valid[::2, ::2]
+    is_plane = labels[::2, ::2][outline] == PLANE
+    first = largest[outline].astype(np.int64)
+    second = smallest[outline].astype(np.int64)
+    second[second == first] = 0  # one vote per component
+    second[second == 65535] = 0
+    total = np.bincount(first, minlength=count) + np.bincount(second, minlength=count)
+    plane = (np.bincount(first, weights=is_plane, minlength=count)
+             + np.bincount(second, weights=is_plane, minlength=count))
+    fill = (plane >= _FILL_OUTLINE_SHARE * total) & (total >= _FILL_MIN_OUTLINE)
     fill[0] = False
-    labels[fill[components]] = PLANE
+    if not fill.any():
+        return
+    chosen = fill[components].astype(np.uint8)
+    height, width = labels.shape
+    chosen = cv2.resize(chosen, (2 * chosen.shape[1], 2 * chosen.shape[0]),
+                        interpolation=cv2.INTER_NEAREST)[:height, :width]
+    labels[(chosen == 1) & fillable] = PLANE
 
 
-def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-               config: MaskConfig, fill_enclosed: bool = True) -> np.ndarray:
-    """Label every left pixel as on the plane, off the plane or unknown.
+def _check_focal(focal_px: tuple[float, float]) -> tuple[float, float]:
+    """Return the focal range as floats; ValueError unless 0 < min <= max, finite."""
+    try:
+        low, high = (float(v) for v in focal_px)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f'focal_px must be two numbers (min, max), got {focal_px!r}') from err
+    if not (math.isfinite(low) and math.isfinite(high) and 0.0 < low <= high):
+        raise ValueError(f'focal_px must be finite with 0 < min <= max, got {focal_px!r}')
+    return low, high
 
-    Works at ``config.scale`` resolution: the right image is warped into the left view with the
-    plane homography (scaled as ``S_r H S_l^-1``), and a zero-mean normalised
-    cross-correlation over ``config.window_px`` windows decides plane (NCC at least
-    ``config.ncc_threshold``) or obstacle. Windows where either image's grey-level standard
-    deviation is below ``config.min_texture``, or that reach outside the right image, are
-    unknown. The plane and obstacle labels are then opened and closed with a
-    ``config.morph_px`` square, and the result is upsampled to the left image's size by
-    nearest neighbour.
+
+def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                  config: MaskConfig, focal_px: tuple[float, float] = DEFAULT_FOCAL_PX,
+                  principal_point_px: Sequence[float] = ()) -> ParallaxMask:
+    """Label every left pixel plane, obstacle or unknown by its residual parallax.
+
+    See the module docstring for the measurement and the labels. Works at ``config.scale``:
+    the right image is warped into the left view with ``S_r H S_l^-1``, the labels are
+    upsampled to the left image's size by nearest neighbour.
 
     Args:
         left: (H, W) uint8 left image.
         right: (H', W') uint8 right image; its size may differ from the left image's.
         homography: (3, 3) float plane homography mapping left pixels to right pixels.
         config: Mask settings.
-        fill_enclosed: Label as plane the low-texture unknown regions whose outline is (at
-            least 95 %) plane, such as the plain interior of a floor tile. Obstacles are never
-            relabelled, and pixels that map outside the right image stay unknown.
+        focal_px: (min, max) focal length range of the prior (``prior.focal_px``), for the
+            plane at infinity (:mod:`domplane_ros.core.parallax`).
+        principal_point_px: The prior's principal point (``prior.principal_point_px``), or
+            empty for the image centre.
 
     Returns:
-        (H, W) uint8 labels: 255 plane, 127 obstacle, 0 unknown.
+        The :class:`ParallaxMask`: labels (H, W) uint8 and the residual parallax at the
+        working scale.
 
     Raises:
-        ValueError: If an image is not a non-empty 2-D uint8 array, or the homography is not a
-            finite, non-singular (3, 3) matrix.
+        ValueError: If an image is not a non-empty 2-D uint8 array, the homography is not a
+            finite, non-singular (3, 3) matrix, or the focal range is not positive.
 
     """
     left = check_gray(left, 'left')
     right = check_gray(right, 'right')
     hom = as_valid_homography(homography)
+    focal = _check_focal(focal_px)
     height, width = left.shape
     left_small, scale_left = _resize(left, config.scale)
     right_small, scale_right = _resize(right, config.scale)
@@ -120,13 +207,28 @@ def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
         raise ValueError('homography is not invertible at mask scale')
     window = int(config.window_px)
     warped, valid = _warp_to_left(right_small, hom_small, (small_w, small_h), window)
-    labels = _ncc_labels(left_small, warped, valid, window, config)
-    _open_and_close(labels, valid, int(config.morph_px))
-    if fill_enclosed:
-        _fill_enclosed(labels, (labels == UNKNOWN) & valid)
+    fit = _local_fit(left_small, warped, window)
+    # Full-resolution pixels per working pixel along x (the epipolar direction).
+    px_per_working = width / small_w
+    # The camera model has one calibration for both cameras: a right image of another size
+    # is brought to the left image's size first.
+    right_h, right_w = right.shape
+    same_size = resize_homography(width / right_w, height / right_h) @ hom
+    shift_inf = infinity_shift(same_size, width, height, focal, (small_w, small_h),
+                               principal_point_px)
+    labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config)
+    _clean(labels, valid, decidable, int(config.morph_px))
+    _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid)
     if (small_h, small_w) != (height, width):
         labels = cv2.resize(labels, (width, height), interpolation=cv2.INTER_NEAREST_EXACT)
-    return labels
+    return ParallaxMask(labels=labels, parallax=parallax)
+
+
+def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+               config: MaskConfig, focal_px: tuple[float, float] = DEFAULT_FOCAL_PX
+               ) -> np.ndarray:
+    """Return only the (H, W) uint8 labels of :func:`parallax_mask` (same arguments)."""
+    return parallax_mask(left, right, homography, config, focal_px).labels
 
 
 def _warp_to_left(right: np.ndarray, homography: np.ndarray, size: tuple[int, int],
@@ -134,21 +236,73 @@ def _warp_to_left(right: np.ndarray, homography: np.ndarray, size: tuple[int, in
     """Return the right image warped into the left view, and the (h, w) bool valid windows.
 
     A window is valid when all its pixels map inside the right image (with all four bilinear
-    neighbours inside).
+    neighbours inside). The inside region is the right image's outline mapped into the left
+    view (a convex quadrilateral when no corner crosses the line at infinity; otherwise the
+    right image's footprint is warped pixel by pixel).
     """
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     warped = cv2.warpPerspective(right, homography, size, flags=flags,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    inside = cv2.warpPerspective(np.full(right.shape, 255, np.uint8), homography, size,
-                                 flags=flags, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    kernel = np.ones((window, window), np.uint8)
+    inside = _inside(right.shape, homography, size)
+    kernel = np.ones((window + 2, window + 2), np.uint8)
     valid = cv2.erode(inside, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 255
     return warped, valid
 
 
-def _ncc_labels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, window: int,
-                config: MaskConfig) -> np.ndarray:
-    """Return (h, w) uint8 labels by the local zero-mean NCC of two aligned images."""
+def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[int, int]
+            ) -> np.ndarray:
+    """Return the (h, w) uint8 mask (255) of left pixels mapped inside the right image."""
+    height, width = right_shape
+    corners = np.array([[0.0, 0.0, 1.0], [width - 1.0, 0.0, 1.0],
+                        [width - 1.0, height - 1.0, 1.0], [0.0, height - 1.0, 1.0]])
+    mapped = np.linalg.solve(homography, corners.T).T
+    if np.all(mapped[:, 2] > 1e-9):
+        quad = mapped[:, :2] / mapped[:, 2:]
+        if np.all(np.abs(quad) < 1e6):
+            inside = np.zeros((size[1], size[0]), np.uint8)
+            cv2.fillConvexPoly(inside, np.round(quad * 16).astype(np.int32), 255,
+                               lineType=cv2.LINE_8, shift=4)
+            return inside
+    return cv2.warpPerspective(np.full(right_shape, 255, np.uint8), homography, size,
+                               flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
+                               borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+
+@dataclass(frozen=True)
+class _LocalFit:
+    """Per-pixel window statistics of the left and warped right images (working scale).
+
+    Attributes:
+        shift: (h, w) float32 signed one-step residual parallax, working pixels (positive:
+            nearer than the plane).
+        ncc: (h, w) float32 zero-shift normalised correlation.
+        variance: (h, w) float32 grey-level variance of the left window.
+        flow_shift: (h, w) float32 signed residual parallax from DIS optical flow, working
+            pixels: coarse, but not limited to small shifts.
+    """
+
+    shift: np.ndarray
+    ncc: np.ndarray
+    variance: np.ndarray
+    flow_shift: np.ndarray
+
+
+def _dis_flow() -> cv2.DISOpticalFlow:
+    """Return a new DIS optical flow object (ultrafast preset).
+
+    A new one per call (creating it costs microseconds): a reused object keeps state between
+    calls on small images, so the same pair would not always give the same mask.
+    """
+    return cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST)
+
+
+def _local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> _LocalFit:
+    """Return the one-step 1-D Lucas-Kanade shift and the zero-shift NCC of every window.
+
+    With ``g`` the mean x gradient of both images and ``e`` the difference of the two
+    images after removing each window's mean, the shift that aligns them is
+    ``sum(g e) / (sum(g^2) + regulariser)`` (Gauss-Newton from zero shift).
+    """
     a = left.astype(np.float32)
     b = warped.astype(np.float32)
     size = (window, window)
@@ -157,35 +311,84 @@ def _ncc_labels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, window:
     var_a = cv2.blur(a * a, size) - mean_a * mean_a
     var_b = cv2.blur(b * b, size) - mean_b * mean_b
     cov = cv2.blur(a * b, size) - mean_a * mean_b
-    min_var = float(config.min_texture) ** 2
-    textured = (var_a >= min_var) & (var_b >= min_var) & (var_a > 0) & (var_b > 0)
-    decided = valid & textured
-    # ncc >= t  <=>  cov >= t sqrt(var_a var_b), without dividing by small numbers.
-    bound = config.ncc_threshold * np.sqrt(np.maximum(var_a * var_b, 0.0))
-    on_plane = decided & (cov >= bound)
-    labels = np.full(left.shape, UNKNOWN, np.uint8)
-    labels[decided] = OBSTACLE
-    labels[on_plane] = PLANE
-    return labels
+    ncc = cov / np.sqrt(np.maximum(var_a * var_b, 1e-6))
+    grad = cv2.Sobel(a, cv2.CV_32F, 1, 0, ksize=3, scale=0.0625)
+    grad += cv2.Sobel(b, cv2.CV_32F, 1, 0, ksize=3, scale=0.0625)
+    diff = (b - mean_b) - (a - mean_a)
+    num = cv2.blur(grad * diff, size)
+    den = cv2.blur(grad * grad, size)
+    shift = num / (den + np.float32(_REGULARISER))
+    return _LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=_flow_shift(left, warped))
 
 
-def _open_and_close(labels: np.ndarray, valid: np.ndarray, morph: int) -> None:
-    """Clean the plane and obstacle labels in place by a ``morph`` square (< 2: no-op)."""
+def _flow_shift(left: np.ndarray, warped: np.ndarray) -> np.ndarray:
+    """Return the signed x shift (working pixels) of DIS optical flow at half the working size.
+
+    Only large parallax is read from it, so half the resolution serves and costs a quarter.
+    """
+    height, width = left.shape
+    if min(height, width) < _DIS_MIN_SIZE:
+        return np.zeros(left.shape, np.float32)  # too small for a pyramid: no coarse flow
+    if min(height, width) < 2 * _DIS_MIN_SIZE:
+        flow = _dis_flow().calc(left, warped, None)
+        return -flow[..., 0]
+    half_left, half_warped = cv2.pyrDown(left), cv2.pyrDown(warped)
+    flow = _dis_flow().calc(half_left, half_warped, None)[..., 0]
+    return cv2.resize(flow, (width, height), interpolation=cv2.INTER_LINEAR) * np.float32(-2.0)
+
+
+def _classify(fit: _LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
+              px_per_working: float, config: MaskConfig
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return the working-scale labels, the parallax image and the decidable pixels.
+
+    Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
+    at least ``config.parallax_threshold_px`` of residual parallax.
+    """
+    threshold = float(config.parallax_threshold_px)
+    measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
+    small = measurable & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
+    small &= fit.ncc >= float(config.ncc_threshold)
+    residual = np.where(small, fit.shift, fit.flow_shift)
+    residual *= np.float32(px_per_working)
+    magnitude = np.abs(residual)
+    # kappa * shift_inf is the parallax an obstacle of the minimum height would show.
+    decidable = shift_inf >= threshold / height_factor(float(config.min_obstacle_height))
+    plane = small & (magnitude < threshold)
+    labels = (plane & decidable).view(np.uint8) * np.uint8(PLANE)
+    # Off the plane: a measured parallax at or above the threshold, or a clear zero-shift
+    # mismatch. An obstacle is nearer than infinity by the threshold and below the horizon;
+    # where an obstacle of the minimum height would not show, only a clearly larger parallax
+    # (the coarse flow is not trusted near the threshold there) counts. A point farther than
+    # the plane but nearer than infinity (a hole in the ground) is an obstacle too.
+    off = (magnitude >= threshold) | (fit.ncc < _REJECT_NCC)
+    off &= measurable & ~plane & (shift_inf > 0)
+    off &= decidable | (residual >= _FAR_FACTOR * threshold)
+    residual += shift_inf
+    off &= residual >= threshold
+    labels[off] = OBSTACLE
+    magnitude[~measurable] = NOT_MEASURED
+    return labels, magnitude, decidable
+
+
+def _clean(labels: np.ndarray, valid: np.ndarray, decidable: np.ndarray, morph: int) -> None:
+    """Clean the labels in place with a ``morph`` square (< 2: no-op).
+
+    Obstacles are opened (specks become unknown) and closed (gaps inside an obstacle, plane or
+    unknown, become obstacle); the plane is only closed, and only over unknown decidable
+    pixels, so thin plane evidence such as tile joints survives for the fill.
+    """
     if morph < 2:
         return
     square = np.ones((morph, morph), np.uint8)
-    for value in (OBSTACLE, PLANE):
-        region = (labels == value).astype(np.uint8)
-        cleaned = cv2.morphologyEx(region, cv2.MORPH_OPEN, square)
-        cleaned = cv2.morphologyEx(cleaned, cv2.MORPH_CLOSE, square)
-        # Opening drops specks (to unknown). Closing fills gaps inside a region: the
-        # obstacle's may claim plane and unknown pixels, the plane's only unknown ones,
-        # so obstacles stay intact; pixels outside the right image stay unknown.
-        labels[(region == 1) & (cleaned == 0)] = UNKNOWN
-        claim = (cleaned == 1) & (region == 0) & valid
-        if value == PLANE:
-            claim &= labels == UNKNOWN
-        labels[claim] = value
+    region = (labels == OBSTACLE).astype(np.uint8)
+    cleaned = cv2.morphologyEx(region, cv2.MORPH_OPEN, square)
+    cleaned = cv2.morphologyEx(cleaned, cv2.MORPH_CLOSE, square)
+    labels[(region == 1) & (cleaned == 0)] = UNKNOWN
+    labels[(cleaned == 1) & (region == 0) & valid] = OBSTACLE
+    region = (labels == PLANE).astype(np.uint8)
+    closed = cv2.morphologyEx(region, cv2.MORPH_CLOSE, square)
+    labels[(closed == 1) & (labels == UNKNOWN) & valid & decidable] = PLANE
 
 
 def overlay(gray: np.ndarray, mask: np.ndarray, inliers: np.ndarray | None = None,

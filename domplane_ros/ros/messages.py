@@ -115,6 +115,29 @@ def image_msg(array: np.ndarray, header: Header, encoding: str) -> Image:
     return msg
 
 
+def parallax_msg(parallax: np.ndarray, header: Header) -> Image:
+    """Return a 32FC1 sensor_msgs/Image (little-endian) of a finite (H, W) parallax image.
+
+    Raises:
+        ValueError: If the array is not 2-D and non-empty, or holds a non-finite value.
+
+    """
+    array = np.asarray(parallax, dtype='<f4')
+    if array.ndim != 2 or 0 in array.shape:
+        raise ValueError(f'parallax image must have shape (H, W) with H, W > 0, got '
+                         f'{array.shape}')
+    if not np.all(np.isfinite(array)):
+        raise ValueError('parallax image holds non-finite values')
+    msg = Image()
+    msg.header = header
+    msg.height, msg.width = array.shape
+    msg.encoding = '32FC1'
+    msg.is_bigendian = 0
+    msg.step = 4 * array.shape[1]
+    msg.data = np.ascontiguousarray(array).tobytes()
+    return msg
+
+
 def diagnostics_msg(stamp: Any, name: str, hardware_id: str, level: int, message: str,
                     values: Iterable[tuple[str, Any]]) -> DiagnosticArray:
     """Return a DiagnosticArray with one status.

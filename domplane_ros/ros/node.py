@@ -3,9 +3,9 @@
 Subscribes to ``left/image_raw`` and ``right/image_raw`` (or, with ``image_transport``
 ``compressed``, to ``<topic>/compressed`` of those topics after remapping, as image_transport
 does), pairs them by stamp, and publishes ``plane/result`` (the stamped result of every pair),
-``plane/homography``, ``plane/mask``, ``plane/debug_image`` (only while subscribed) and
-``/diagnostics``. If ``camera_info.topic`` is set, the left camera's K narrows the prior.
-If ``head.joint_states_topic`` is set, it also subscribes to the head's
+``plane/homography``, ``plane/mask``, ``plane/debug_image`` and ``plane/parallax`` (both only
+while subscribed) and ``/diagnostics``. If ``camera_info.topic`` is set, the left camera's K
+narrows the prior. If ``head.joint_states_topic`` is set, it also subscribes to the head's
 ``sensor_msgs/JointState``: a fast joint is a hint to the pipeline to expect a big change.
 Image callbacks only hand work over: a worker thread processes the newest pair, and a pair
 that is replaced before the worker takes it is counted as dropped (:class:`NewestSlot`).
@@ -26,9 +26,10 @@ from domplane_ros.errors import wire_repr
 from domplane_ros.ros.camera_info import camera_model
 from domplane_ros.ros.handover import NewestSlot
 from domplane_ros.ros.messages import descriptor, diagnostics_msg, homography_msg, image_msg
-from domplane_ros.ros.messages import READ_ONLY, result_msg
+from domplane_ros.ros.messages import parallax_msg, READ_ONLY, result_msg
 from domplane_ros.ros.startup import check_params_files, init_rclpy
 from domplane_ros.ros.usage import usage, wants_help
+from domplane_ros.stream.frame import parallax_image
 from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.stream.session import ProcessedPair, SIDES, StreamSession
@@ -114,6 +115,7 @@ class PlaneNode(Node):
         self._pub_h = self.create_publisher(Float64MultiArray, 'plane/homography', 10)
         self._pub_mask = self.create_publisher(Image, 'plane/mask', 10)
         self._pub_debug = self.create_publisher(Image, 'plane/debug_image', 2)
+        self._pub_parallax = self.create_publisher(Image, 'plane/parallax', 2)
         self._pub_diag = self.create_publisher(DiagnosticArray, '/diagnostics', 10)
 
     def _make_subscriptions(self, config: PlaneNodeConfig) -> list[Any]:
@@ -356,6 +358,8 @@ class PlaneNode(Node):
         if self._pub_debug.get_subscription_count() > 0:
             rgb = debug_overlay(frame.left, result)
             self._pub_debug.publish(image_msg(rgb, header, 'rgb8'))
+        if self._pub_parallax.get_subscription_count() > 0:
+            self._pub_parallax.publish(parallax_msg(parallax_image(result), header))
 
     # --- Diagnostics ---------------------------------------------------------------------
     def publish_diagnostics(self) -> None:

@@ -134,6 +134,35 @@ def random_scene(seed: int, width: int = 640, height: int = 480, floor: str | No
                          wall_distance=float(rng.uniform(8, 20)), blur_sigma=blur_sigma)
 
 
+def indoor_scene(seed: int, width: int = 640, height: int = 480,
+                 baseline_over_height: float = 0.075, focal_px: float = 525.0
+                 ) -> StereoFrame:
+    """Render a small-baseline indoor head: a wall 3-6 m ahead, 2-4 boxes (furniture) before it.
+
+    The default is a 7.5 cm baseline at 1 m height, focal 525 px, no vergence, tilt drawn in
+    10-25 degrees, a random floor kind. Every pixel that is not floor is wall or furniture.
+
+    Args:
+        seed: Seed of every random choice.
+        width: Image width in pixels.
+        height: Image height in pixels.
+        baseline_over_height: Stereo baseline over camera height.
+        focal_px: Focal length in pixels.
+
+    Returns:
+        The rendered :class:`StereoFrame` (``background='wall'``).
+
+    """
+    rng = np.random.default_rng((int(seed), 7575))
+    setup = CameraSetup(focal_px, baseline_over_height, float(rng.uniform(10.0, 25.0)), 0.0,
+                        width, height)
+    wall = float(rng.uniform(3.0, 6.0))
+    boxes = random_boxes(rng, setup, int(rng.integers(2, 5)), max_distance=wall - 0.6)
+    floor = FLOOR_KINDS[int(rng.integers(len(FLOOR_KINDS)))]
+    return render_stereo(setup, boxes, floor=floor, seed=int(seed), background='wall',
+                         wall_distance=wall, noise_std=1.0)
+
+
 def scene_sequence(n_frames: int, seed: int, width: int = 640, height: int = 480,
                    floor: str | None = None, n_boxes: int = 3, step: float = 0.04,
                    yaw_rate_deg: float = 0.6, tilt_jitter_deg: float = 1.0,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from domplane_ros.core.mask import overlay
+from domplane_ros.core.mask import NOT_MEASURED, overlay, ParallaxMask
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 import numpy as np
 
@@ -18,6 +18,9 @@ class FrameResult:
         ok: Whether a plane was found; if not, ``homography`` is None and the mask is all 0.
         homography: (3, 3) float64 left-to-right homography with ``H[2, 2] == 1``, or None.
         mask: (H, W) uint8 left-image mask: 255 plane, 127 obstacle, 0 unknown.
+        parallax: (h, w) float32 residual parallax after the plane warp at the mask's working
+            scale, full-resolution pixels, ``NOT_MEASURED`` (-1) where not measured; None
+            when no plane was found (see :func:`parallax_image`).
         estimate: The estimator's result (success or failure value).
         left_points: (N, 2) float64 left corners.
         right_points: (M, 2) float64 right corners.
@@ -66,6 +69,7 @@ class FrameResult:
     candidates: int = 0
     fast_motion: bool = False
     confidence: float = 0.0
+    parallax: np.ndarray | None = None
 
     @property
     def n_inliers(self) -> int:
@@ -96,3 +100,14 @@ def debug_overlay(left: np.ndarray, result: FrameResult) -> np.ndarray:
     else:
         line_inl = np.zeros(segs.shape[0], bool)
     return overlay(left, result.mask, pts[inl], pts[~inl], segs[line_inl], segs[~line_inl])
+
+
+def parallax_image(result: FrameResult) -> np.ndarray:
+    """Return the (H, W) float32 residual parallax of a frame at the mask's size.
+
+    Full-resolution pixels, nearest-neighbour upsampled from the mask's working scale;
+    ``NOT_MEASURED`` (-1) where it was not measured, everywhere when no plane was found.
+    """
+    if result.parallax is None:
+        return np.full(result.mask.shape, NOT_MEASURED, np.float32)
+    return ParallaxMask(result.mask, result.parallax).parallax_image()

@@ -20,7 +20,7 @@ from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.homography import as_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.lines import detect_lines
-from domplane_ros.core.mask import plane_mask
+from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
 from domplane_ros.core.pyramid import level_homography, motion_to_full, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
@@ -194,7 +194,7 @@ class PlanePipeline:
         t2 = time.perf_counter()
         step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
         t3 = time.perf_counter()
-        estimate, h, mask = self._publish(step, *work, feats)
+        estimate, h, mask, parallax = self._publish(step, *work, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
             self.counts.add('too_few_features')
@@ -204,7 +204,8 @@ class PlanePipeline:
                                          for image in work), *track_pts)
         t4 = time.perf_counter()
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
-                           estimate=estimate, left_points=feats.left_points,
+                           parallax=parallax, estimate=estimate,
+                           left_points=feats.left_points,
                            right_points=feats.right_points, reinitialised=step.reinitialised,
                            reason=reason, state=self._state,
                            timings_ms=_timings_ms(t0, t1, t2, t3, t4),
@@ -228,17 +229,28 @@ class PlanePipeline:
         return step
 
     def _publish(self, step: _Step, left: WorkingImage, right: WorkingImage, feats: Features
-                 ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray]:
-        """Return the frame's estimate, homography and mask; keep an accepted plane.
+                 ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray,
+                            np.ndarray | None]:
+        """Return the frame's estimate, homography, mask and parallax; keep an accepted plane.
 
         The mask is computed on the working level (``mask.scale`` of it) and scaled up to the
-        full image, so its cost grows with the working resolution, not the camera's.
+        full image, so its cost grows with the working resolution, not the camera's; the
+        residual parallax keeps the mask's working scale, in full-resolution pixels.
         """
         estimate = step.estimate if step.estimate is not None else FailedEstimate(step.reason)
+        parallax = None
         if step.accepted:
             h = estimate.homography
-            mask = _full_mask(left, plane_mask(left.image, right.image,
-                                               level_homography(h, left.scale), self.config.mask))
+            prior = self.config.prior
+            scale = left.scale
+            out = parallax_mask(left.image, right.image, level_homography(h, scale),
+                                self.config.mask, tuple(f / scale for f in prior.focal_px),
+                                tuple(c / scale for c in prior.principal_point_px))
+            mask, parallax = _full_mask(left, out.labels), out.parallax
+            if scale != 1.0:
+                # Working-level pixels to full-resolution pixels (-1: not measured).
+                parallax = np.where(parallax >= 0, parallax * np.float32(scale),
+                                    parallax).astype(np.float32)
             self._last_h = h
             self._last_energy_per_point = estimate.final_energy / max(feats.n_left, 1)
             self.stats.succeeded += 1
@@ -246,7 +258,7 @@ class PlanePipeline:
             h = None
             mask = np.zeros(left.full.shape, np.uint8)
             self.stats.failed += 1
-        return estimate, h, mask
+        return estimate, h, mask, parallax
 
     def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
                  warnings: tuple[str, ...], t0: float, fast: bool) -> FrameResult:

@@ -102,9 +102,13 @@ def test_product_on_kitti_meets_the_road_target(kitti_cases):
     assert ours['error_px'] < 0.7
     assert ours['error_px'] < datasets.KITTI_TARGET_PX
     assert ours['warm_error_px'] < 0.7
-    # Measured: road IoU 0.79, off-road recall 0.79, 174 inliers of 324 corners.
-    assert ours['road_iou'] > 0.7
-    assert ours['off_road_recall'] > 0.7
+    # Measured: road IoU 0.86 (0.79 with the NCC mask before issue 12), off-road (> 3 px)
+    # marked obstacle 0.63 (0.79 before: the residual-parallax mask leaves the far buildings
+    # and trees at and above the horizon unknown), off-road marked plane 0.026, 174 inliers
+    # of 324 corners.
+    assert ours['road_iou'] > 0.8
+    assert ours['off_road_recall'] > 0.55
+    assert ours['off_road_as_plane'] < 0.05, ours
     assert ours['inliers'] > 120
     assert case.runs['ours'].mask.shape == case.left.shape
 

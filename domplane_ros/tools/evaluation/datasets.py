@@ -137,7 +137,8 @@ def _kitti_case(name: str, left: np.ndarray, right: np.ndarray, ref: KittiRefere
     gt_target = road_points - np.stack([ref.disparity[ys, xs], np.zeros(xs.size)], axis=1)
 
     def score(run: MethodRun) -> dict[str, float]:
-        scores = {'plane_iou': math.nan, 'obstacle_recall': math.nan}
+        scores = {'plane_iou': math.nan, 'obstacle_recall': math.nan,
+                  'obstacle_as_plane': math.nan}
         if run.mask is not None:
             scores = mask_scores(run.mask, ref.road, ref.off_road, ref.road | ref.off_road)
         return {'error_px': mean_transfer_px(run.homography, road_points, road_target),
@@ -145,7 +146,8 @@ def _kitti_case(name: str, left: np.ndarray, right: np.ndarray, ref: KittiRefere
                                                   road_target),
                 'error_vs_gt_disparity_px': mean_transfer_px(run.homography, road_points,
                                                              gt_target),
-                'road_iou': scores['plane_iou'], 'off_road_recall': scores['obstacle_recall']}
+                'road_iou': scores['plane_iou'], 'off_road_recall': scores['obstacle_recall'],
+                'off_road_as_plane': scores['obstacle_as_plane']}
 
     runs = _both(left, right, config, repeats)
     figures = _figures(runs, score)

@@ -1,0 +1,352 @@
+"""Measure the ground/obstacle mask: residual parallax (now) against local NCC (before), one run.
+
+Run ``python -m domplane_ros.tools.evaluate_mask [--scenes N] [--held-out] [--indoor N]
+[--data DIR] [--out DIR] [--repeats R]``. Both masks run in the same process on the same
+images:
+
+* ``parallax``: :func:`~domplane_ros.core.mask.parallax_mask` with the documented defaults
+  (``MaskConfig()``) and the prior's focal range (the default prior's on rendered scenes, the
+  KITTI prior's on KITTI);
+* ``ncc``: the mask before issue 12 (:mod:`domplane_ros.tools.evaluation.ncc_mask`);
+* ``parallax, min height 0.05``: the parallax mask with ``mask.min_obstacle_height`` 0.05
+  instead of 0.1 (more pixels unknown, thinner bottoms of walls and furniture marked plane).
+
+Data, each scored with the plane homography named in the table:
+
+* **rendered**: :func:`~domplane_ros.sim.random_scene` seeds ``0 .. N-1`` (the tuning set) or,
+  with ``--held-out``, ``1000 .. 1000+N-1`` (not looked at while tuning), true homography.
+  Plane truth = floor seen by both cameras, obstacle truth = box pixels. Figures per scene,
+  medians over scenes: plane IoU, obstacle recall and precision, true ground marked obstacle.
+* **KITTI 2015 000046**: road = ground-truth disparity pixels within 1 px of the robust road
+  plane, off-road = pixels more than 1 px off it (the issue's labels); scored with the
+  reference homography (from that plane) and with the homography our pipeline estimates (the
+  documented KITTI prior and ROI).
+* **indoor**: :func:`~domplane_ros.sim.generators.indoor_scene`, a small-baseline head: 7.5 cm
+  baseline at 1 m height (baseline / height 0.075), focal 525 px, tilt 10-25 deg, a wall
+  3-6 m ahead, 2-4 boxes (furniture) before it; seeds ``0 .. M-1`` (``2000 ..`` with
+  ``--held-out``). Wall and
+  furniture pixels marked plane, true homography.
+* **time**: both masks at 640x480 on one core, median over ``R`` interleaved repetitions on
+  the first rendered scenes.
+
+With ``--readme-overlay FILE`` it also writes the README picture (right image, left image
+with the pipeline's debug overlay on a rendered scene). Writes ``mask_contact_sheet.png``
+(left image; NCC mask; parallax mask; residual parallax, 0-8 px, black where not measured)
+and ``mask_summary.txt`` (the tables) to ``--out``. CPU time is given beside wall-clock time
+because the machine may be shared: it counts only this process's work.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+from pathlib import Path
+import sys
+import time
+from typing import Callable, Sequence
+
+import cv2
+from domplane_ros.config import FeatureConfig, MaskConfig, PlaneNodeConfig
+from domplane_ros.core.mask import (DEFAULT_FOCAL_PX, mask_scores, OBSTACLE, overlay,
+                                    parallax_mask, ParallaxMask, PLANE)
+from domplane_ros.sim.generators import indoor_scene, random_scene
+from domplane_ros.sim.model import StereoFrame
+from domplane_ros.stream.frame import debug_overlay
+from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.tools.common import (add_output_argument, machine_name, one_core, progress,
+                                       tool_parser)
+from domplane_ros.tools.evaluation.datasets import KITTI_PRIOR, KITTI_ROI
+from domplane_ros.tools.evaluation.methods import run_ours
+from domplane_ros.tools.evaluation.ncc_mask import ncc_mask
+from domplane_ros.tools.evaluation.references import (default_data_dir, KITTI_DIR,
+                                                      kitti_reference, read_gray)
+from domplane_ros.tools.evaluation.tables import fmt, markdown_table
+import numpy as np
+
+HELD_OUT_FIRST_SEED = 1000
+# The README picture's rendered scene.
+README_SEED = 6
+INDOOR_FIRST_SEED = 0
+INDOOR_HELD_OUT_FIRST_SEED = 2000
+KITTI_LABEL_PX = 1.0
+# The third column: the parallax mask with a lower minimum obstacle height.
+LOW_MIN_HEIGHT = 0.05
+# Targets of issue 12.
+TARGETS = {'plane_iou': 0.92, 'obstacle_recall': 0.92, 'ground_as_obstacle': 0.01,
+           'road_plane': 0.95, 'off_road_not_plane': 0.95, 'off_road_plane': 0.02,
+           'indoor_plane': 0.02, 'time_ms': 3.0}
+MaskFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], ParallaxMask]
+
+
+def masks(focal_px: tuple[float, float] = DEFAULT_FOCAL_PX) -> dict[str, MaskFunction]:
+    """Return both mask functions as ``(left, right, H) -> ParallaxMask``."""
+    config = MaskConfig()
+    low = MaskConfig(min_obstacle_height=LOW_MIN_HEIGHT)
+
+    def old(left: np.ndarray, right: np.ndarray, hom: np.ndarray) -> ParallaxMask:
+        return ParallaxMask(ncc_mask(left, right, hom), np.zeros((1, 1), np.float32))
+
+    def new(left: np.ndarray, right: np.ndarray, hom: np.ndarray) -> ParallaxMask:
+        return parallax_mask(left, right, hom, config, focal_px)
+
+    def new_low(left: np.ndarray, right: np.ndarray, hom: np.ndarray) -> ParallaxMask:
+        return parallax_mask(left, right, hom, low, focal_px)
+
+    return {'ncc': old, 'parallax': new, 'parallax_low': new_low}
+
+
+def rendered_scores(frame: StereoFrame, labels: np.ndarray) -> dict[str, float]:
+    """Return the mask figures of a rendered frame against its truth."""
+    ground = frame.plane_left & frame.visible_in_right
+    scores = mask_scores(labels, ground, frame.obstacle_left)
+    scores['ground_as_obstacle'] = float(np.mean(labels[ground] == OBSTACLE)) \
+        if ground.any() else math.nan
+    return scores
+
+
+def indoor_scores(frame: StereoFrame, labels: np.ndarray) -> dict[str, float]:
+    """Return the share of wall and furniture pixels marked plane, and of the ground."""
+    off_ground = ~frame.plane_left
+    ground = frame.plane_left & frame.visible_in_right
+    return {'indoor_plane': float(np.mean(labels[off_ground] == PLANE)),
+            'indoor_obstacle': float(np.mean(labels[off_ground] == OBSTACLE)),
+            'ground_plane': float(np.mean(labels[ground] == PLANE)) if ground.any()
+            else math.nan}
+
+
+@dataclass
+class KittiLabels:
+    """KITTI's issue-12 labels: road and off-road pixels of the ground-truth disparity."""
+
+    road: np.ndarray
+    off_road: np.ndarray
+    reference_h: np.ndarray
+
+
+def kitti_labels(folder: Path) -> KittiLabels:
+    """Return road (within 1 px of the road plane) and off-road (beyond 1 px) pixels."""
+    ref = kitti_reference(folder)
+    ys, xs = np.mgrid[0:ref.disparity.shape[0], 0:ref.disparity.shape[1]]
+    known = np.isfinite(ref.disparity)
+    residual = np.full(ref.disparity.shape, np.inf)
+    residual[known] = ref.plane.residuals(xs[known], ys[known], ref.disparity[known])
+    return KittiLabels(road=known & (residual <= KITTI_LABEL_PX),
+                       off_road=known & (residual > KITTI_LABEL_PX),
+                       reference_h=ref.plane.homography())
+
+
+def kitti_scores(labels: np.ndarray, truth: KittiLabels) -> dict[str, float]:
+    """Return road marked plane, off-road marked obstacle or unknown, off-road marked plane."""
+    return {'road_plane': float(np.mean(labels[truth.road] == PLANE)),
+            'off_road_not_plane': float(np.mean(labels[truth.off_road] != PLANE)),
+            'off_road_plane': float(np.mean(labels[truth.off_road] == PLANE)),
+            'off_road_obstacle': float(np.mean(labels[truth.off_road] == OBSTACLE))}
+
+
+def time_masks(frames: Sequence[StereoFrame], repeats: int) -> dict[str, dict[str, float]]:
+    """Return each mask's median wall-clock and CPU time in ms (interleaved, one core)."""
+    functions = masks()
+    times: dict[str, dict[str, list[float]]] = {
+        name: {'wall': [], 'cpu': []} for name in functions}
+    with one_core():
+        for name, function in functions.items():  # warm-up (first-use allocations)
+            function(frames[0].left, frames[0].right, frames[0].homography)
+        for index in range(repeats):
+            frame = frames[index % len(frames)]
+            for name, function in functions.items():
+                wall, cpu = time.perf_counter(), time.process_time()
+                function(frame.left, frame.right, frame.homography)
+                times[name]['cpu'].append(1e3 * (time.process_time() - cpu))
+                times[name]['wall'].append(1e3 * (time.perf_counter() - wall))
+    return {name: {key: float(np.median(values)) for key, values in entry.items()}
+            for name, entry in times.items()}
+
+
+def _median(rows: list[dict[str, float]], key: str) -> float:
+    values = [row[key] for row in rows if not math.isnan(row.get(key, math.nan))]
+    return float(np.median(values)) if values else math.nan
+
+
+def _tile(left: np.ndarray, result: ParallaxMask | None, labels: np.ndarray | None
+          ) -> list[np.ndarray]:
+    """Return the contact sheet's tiles of one pair (RGB, the left image's size)."""
+    tiles = [cv2.cvtColor(left, cv2.COLOR_GRAY2RGB)]
+    tiles.append(overlay(left, labels) if labels is not None else tiles[0])
+    if result is not None:
+        tiles.append(overlay(left, result.labels))
+        parallax = result.parallax_image()
+        scaled = np.clip(parallax / 8.0 * 255.0, 0, 255).astype(np.uint8)
+        heat = cv2.cvtColor(cv2.applyColorMap(scaled, cv2.COLORMAP_JET), cv2.COLOR_BGR2RGB)
+        heat[parallax < 0] = 0
+        tiles.append(heat)
+    return tiles
+
+
+def contact_sheet(rows: list[tuple[str, list[np.ndarray]]], tile_width: int = 320
+                  ) -> np.ndarray:
+    """Return the RGB contact sheet: one row of tiles per pair, its name written on it."""
+    lines = []
+    for name, tiles in rows:
+        scaled = []
+        for tile in tiles:
+            height = int(round(tile.shape[0] * tile_width / tile.shape[1]))
+            scaled.append(cv2.resize(tile, (tile_width, height), interpolation=cv2.INTER_AREA))
+        height = max(t.shape[0] for t in scaled)
+        padded = [np.pad(t, ((0, height - t.shape[0]), (0, 0), (0, 0))) for t in scaled]
+        line = np.hstack(padded)
+        cv2.putText(line, name, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 0), 1,
+                    cv2.LINE_AA)
+        lines.append(line)
+    width = max(line.shape[1] for line in lines)
+    return np.vstack([np.pad(line, ((0, 0), (0, width - line.shape[1]), (0, 0)))
+                      for line in lines])
+
+
+def evaluate_rendered(seeds: Sequence[int], sheet: list, shown: int = 4
+                      ) -> dict[str, list[dict[str, float]]]:
+    """Score both masks on rendered scenes; the first ``shown`` go on the contact sheet."""
+    functions = masks()
+    rows: dict[str, list[dict[str, float]]] = {name: [] for name in functions}
+    for index, seed in enumerate(progress(seeds, 'rendered')):
+        frame = random_scene(seed)
+        results = {name: f(frame.left, frame.right, frame.homography)
+                   for name, f in functions.items()}
+        for name, result in results.items():
+            rows[name].append(rendered_scores(frame, result.labels))
+        if index < shown:
+            sheet.append((f'rendered seed {seed} ({frame.floor})',
+                          _tile(frame.left, results['parallax'], results['ncc'].labels)))
+    return rows
+
+
+def evaluate_indoor(seeds: Sequence[int], sheet: list, shown: int = 2
+                    ) -> dict[str, list[dict[str, float]]]:
+    """Score both masks on the small-baseline indoor head."""
+    functions = masks()
+    rows: dict[str, list[dict[str, float]]] = {name: [] for name in functions}
+    for index, seed in enumerate(progress(seeds, 'indoor')):
+        frame = indoor_scene(seed)
+        results = {name: f(frame.left, frame.right, frame.homography)
+                   for name, f in functions.items()}
+        for name, result in results.items():
+            rows[name].append(indoor_scores(frame, result.labels))
+        if index < shown:
+            sheet.append((f'indoor seed {seed} (b/h 0.075)',
+                          _tile(frame.left, results['parallax'], results['ncc'].labels)))
+    return rows
+
+
+def evaluate_kitti(folder: Path, sheet: list) -> dict[str, dict[str, dict[str, float]]]:
+    """Score both masks on KITTI with the reference and with our estimated homography."""
+    left = read_gray(folder / 'left.png')
+    right = read_gray(folder / 'right.png')
+    truth = kitti_labels(folder)
+    config = PlaneNodeConfig(features=FeatureConfig(roi=KITTI_ROI), prior=KITTI_PRIOR)
+    estimated = run_ours(left, right, config, repeats=1).homography
+    functions = masks(KITTI_PRIOR.focal_px)
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for h_name, hom in (('reference H', truth.reference_h), ('our H', estimated)):
+        if hom is None:
+            print(f'KITTI: no plane estimated ({h_name}), skipped', file=sys.stderr)
+            continue
+        results = {name: f(left, right, hom) for name, f in functions.items()}
+        out[h_name] = {name: kitti_scores(r.labels, truth) for name, r in results.items()}
+        sheet.append((f'KITTI 000046, {h_name}',
+                      _tile(left, results['parallax'], results['ncc'].labels)))
+    return out
+
+
+def summary(rendered: dict, indoor: dict, kitti: dict, times: dict[str, float],
+            held_out: bool) -> str:
+    """Return the tables of the run as text."""
+    seeds = 'held-out' if held_out else 'tuning'
+    header = ['data', 'figure', 'target', 'ncc (before)', 'parallax (now)',
+              f'parallax, min height {LOW_MIN_HEIGHT}']
+    rows = []
+    for key, label in (('plane_iou', 'plane IoU (median)'),
+                       ('obstacle_recall', 'obstacle recall (median)'),
+                       ('obstacle_precision', 'obstacle precision (median)'),
+                       ('ground_as_obstacle', 'true ground marked obstacle (median)'),
+                       ('plane_precision', 'plane precision (median)')):
+        target = TARGETS.get(key)
+        rows.append([f'rendered, {seeds}, {len(rendered["ncc"])} scenes', label,
+                     '-' if target is None else fmt(target)]
+                    + [_median(rendered[name], key) for name in rendered])
+    for h_name, scores in kitti.items():
+        for key, label in (('road_plane', 'road marked plane'),
+                           ('off_road_not_plane', 'off-road obstacle or unknown'),
+                           ('off_road_plane', 'off-road marked plane'),
+                           ('off_road_obstacle', 'off-road marked obstacle')):
+            rows.append([f'KITTI 000046, {h_name}', label, fmt(TARGETS.get(key))]
+                        + [scores[name][key] for name in scores])
+    for key, label in (('indoor_plane', 'walls + furniture marked plane (median)'),
+                       ('indoor_obstacle', 'walls + furniture marked obstacle (median)'),
+                       ('ground_plane', 'visible ground marked plane (median)')):
+        rows.append([f'indoor b/h 0.075, {seeds}, {len(indoor["ncc"])} scenes', label,
+                     fmt(TARGETS.get(key))] + [_median(indoor[name], key) for name in indoor])
+    for key, label in (('wall', 'mask time, median ms (wall clock)'),
+                       ('cpu', 'mask time, median ms (CPU time)')):
+        rows.append(['640x480, one core', label, fmt(TARGETS['time_ms'])]
+                    + [times[name][key] for name in times])
+    rows.append(['rendered', 'worst scene plane IoU', '-']
+                + [min(r['plane_iou'] for r in rendered[name]) for name in rendered])
+    cells = [[f'{v:.3f}' if isinstance(v, float) else v for v in row] for row in rows]
+    return machine_name() + '\n\n' + markdown_table(header, cells) + '\n'
+
+
+def readme_overlay(path: Path, seed: int = README_SEED) -> None:
+    """Write the README picture: right image | left image with the pipeline's debug overlay.
+
+    The rendered scene :func:`~domplane_ros.sim.random_scene` ``seed`` goes through a
+    :class:`~domplane_ros.stream.pipeline.PlanePipeline` with the default configuration
+    (prior search, verification, mask), so the picture shows what the node publishes.
+    """
+    frame = random_scene(seed)
+    result = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 1)
+    if not result.ok:
+        raise RuntimeError(f'seed {seed}: no plane ({result.reason})')
+    rgb = debug_overlay(frame.left, result)
+    right = cv2.cvtColor(frame.right, cv2.COLOR_GRAY2RGB)
+    picture = cv2.resize(np.hstack([right, rgb]), None, fx=0.75, fy=0.75,
+                         interpolation=cv2.INTER_AREA)
+    cv2.imwrite(str(path), cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the evaluation (see the module docstring)."""
+    parser = tool_parser(__doc__, 'python -m domplane_ros.tools.evaluate_mask')
+    parser.add_argument('--scenes', type=int, default=30, help='rendered scenes (default 30)')
+    parser.add_argument('--indoor', type=int, default=10, help='indoor scenes (default 10)')
+    parser.add_argument('--held-out', action='store_true',
+                        help=f'held-out seeds ({HELD_OUT_FIRST_SEED}.., '
+                             f'{INDOOR_HELD_OUT_FIRST_SEED}.. indoor)')
+    parser.add_argument('--repeats', type=int, default=60, help='timing repetitions')
+    parser.add_argument('--data', type=Path, default=default_data_dir(),
+                        help='folder holding kitti2015_000046/')
+    add_output_argument(parser, 'mask_output', 'the contact sheet and the summary')
+    parser.add_argument('--readme-overlay', type=Path, default=None,
+                        help='also write the README picture (docs/overlay.png) to this file')
+    args = parser.parse_args(argv)
+    if args.readme_overlay is not None:
+        readme_overlay(args.readme_overlay)
+    first = HELD_OUT_FIRST_SEED if args.held_out else 0
+    indoor_first = INDOOR_HELD_OUT_FIRST_SEED if args.held_out else INDOOR_FIRST_SEED
+    sheet: list = []
+    rendered = evaluate_rendered(range(first, first + args.scenes), sheet)
+    indoor = evaluate_indoor(range(indoor_first, indoor_first + args.indoor), sheet)
+    kitti = evaluate_kitti(args.data / KITTI_DIR, sheet)
+    frames = [random_scene(seed) for seed in range(first, first + 4)]
+    times = time_masks(frames, args.repeats)
+    text = summary(rendered, indoor, kitti, times, args.held_out)
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / 'mask_summary.txt').write_text(text, encoding='utf-8')
+    picture = contact_sheet(sheet)
+    cv2.imwrite(str(args.out / 'mask_contact_sheet.png'),
+                cv2.cvtColor(picture, cv2.COLOR_RGB2BGR))
+    print(text)
+    print(f'wrote {args.out / "mask_contact_sheet.png"} and {args.out / "mask_summary.txt"}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
