@@ -19,7 +19,9 @@ pair interleaved, so a noisy machine slows both alike; ratios are ORB / ours. Ro
 * end-to-end latency through DDS on loopback (image header stamp to the mask's arrival) with a
   publisher at 30 Hz into a live ``plane_node`` in this process, at 640x480 and 3840x2160.
 
-A PNG bar chart of the medians (p95 as whiskers) is written to ``--out``.
+Every pipeline and the node use the documented default configuration and prior (nothing is
+set from a rendered scene's truth). A PNG bar chart of the medians (p95 as whiskers) is written
+to ``--out``.
 """
 
 from __future__ import annotations
@@ -39,7 +41,7 @@ from domplane_ros.sim.generators import random_scene, scene_sequence
 from domplane_ros.sim.truth import every_floor_pixel
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import (add_output_argument, machine_name, mono8_message,
-                                       one_core, prior_around, tool_parser)
+                                       one_core, tool_parser)
 import numpy as np
 
 _RENDER_LIMIT = (1280, 720)  # larger sizes are upscaled renders (the renderer is slow)
@@ -138,7 +140,7 @@ def bench_warm(width: int, height: int, n_frames: int, seed: int,
                config: PlaneNodeConfig | None = None) -> list[Row]:
     """Return the warm rows of one size: the whole pair, the tracker and the mask."""
     frames, setup = sequence(width, height, n_frames, seed)
-    config = config or PlaneNodeConfig(prior=prior_around(setup))
+    config = config or PlaneNodeConfig()
     pipeline = PlanePipeline(config)
     orb, matcher = _orb()
     size = f'{width}x{height}'
@@ -170,7 +172,7 @@ def bench_cold(n_pairs: int, seed: int) -> Row:
     for k in range(n_pairs):
         scene = random_scene(seed + k, floor='random')
         frame = _bench_frames([scene], 1)[0]
-        pipeline = PlanePipeline(PlaneNodeConfig(prior=prior_around(scene.setup)))
+        pipeline = PlanePipeline(PlaneNodeConfig())
         result, ours = _timed(lambda: pipeline.process(
             message_to_gray(frame.left), message_to_gray(frame.right), 0))
         h, base = _timed(lambda: orb_pair(orb, matcher, frame.left, frame.right))
@@ -190,7 +192,7 @@ def bench_cold(n_pairs: int, seed: int) -> Row:
 def bench_lines(n_frames: int, seed: int) -> Row:
     """Return the lines row: warm 640x480 with ``features.kind`` both beside points."""
     frames, setup = sequence(640, 480, n_frames, seed)
-    base_config = PlaneNodeConfig(prior=prior_around(setup))
+    base_config = PlaneNodeConfig()
     both_config = replace(base_config, features=replace(base_config.features, kind='both'))
     points, both = PlanePipeline(base_config), PlanePipeline(both_config)
     row = Row('warm 640x480 kind both', base_name='points only')
@@ -291,7 +293,7 @@ def bench_dds(seconds: float, rate_hz: float, width: int, height: int) -> None:
     frames, setup = sequence(width, height, 10, 11)
     images = [(message_to_gray(f.left), message_to_gray(f.right)) for f in frames]
     rclpy.init()
-    node = _plane_node(prior_around(setup), FeatureConfig())
+    node = _plane_node(PriorConfig(), FeatureConfig())
     driver = rclpy.create_node('bench_driver')
     pubs = [driver.create_publisher(Image, f'{side}/image_raw', qos_profile_sensor_data)
             for side in ('left', 'right')]

@@ -27,8 +27,6 @@ from types import SimpleNamespace
 from typing import Any, Callable, Iterable, Iterator
 
 import cv2
-from domplane_ros.config import PriorConfig
-from domplane_ros.sim.model import CameraSetup
 import numpy as np
 
 ONE_THREAD_ENV = {'OMP_NUM_THREADS': '1', 'OPENBLAS_NUM_THREADS': '1', 'MKL_NUM_THREADS': '1',
@@ -151,19 +149,6 @@ def rss_mb(pid: int) -> tuple[float, float]:
             if key in ('VmRSS', 'VmHWM'):
                 values[key] = int(rest.split()[0]) / 1024.0
     return values.get('VmRSS', float('nan')), values.get('VmHWM', float('nan'))
-
-
-def prior_around(setup: CameraSetup) -> PriorConfig:
-    """Return a prior around a rendered set-up: focal +-20 %, b/h +-30 %, tilt +-8, vergence +-2.
-
-    The benchmarks, the soak and the load test run a head whose set-up is known roughly, as a
-    deployed one would be.
-    """
-    return PriorConfig(focal_px=(setup.focal_px * 0.8, setup.focal_px * 1.2),
-                       baseline_over_height=(setup.baseline_over_height * 0.7,
-                                             setup.baseline_over_height * 1.3),
-                       tilt_deg=(setup.tilt_deg - 8.0, setup.tilt_deg + 8.0),
-                       vergence_deg=(setup.vergence_deg - 2.0, setup.vergence_deg + 2.0))
 
 
 def mono8_message(gray: np.ndarray, stamp_ns: int = 0, encoding: str = 'mono8',

@@ -8,7 +8,6 @@ from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
 from domplane_ros.stream.pipeline import PlanePipeline
-from domplane_ros.tools.common import prior_around
 import numpy as np
 import pytest
 
@@ -19,7 +18,7 @@ def frames():
 
 
 def _run(frames, max_width):
-    config = PlaneNodeConfig(prior=prior_around(frames[0].setup))
+    config = PlaneNodeConfig()
     config = replace(config, features=replace(config.features, max_width=max_width))
     pipeline = PlanePipeline(config)
     return [pipeline.process(f.left, f.right, i * 33_000_000) for i, f in enumerate(frames)]

@@ -6,7 +6,6 @@ import os
 
 import cv2
 from domplane_ros.core.image import message_to_gray
-from domplane_ros.sim.model import CameraSetup
 from domplane_ros.tools import common
 import numpy as np
 import pytest
@@ -26,14 +25,6 @@ def test_one_core_pins_opencv_and_blas_and_restores_them():
 @pytest.mark.skipif(not os.path.exists('/proc/self/maps'), reason='Linux only')
 def test_numpy_openblas_is_found():
     assert common._openblas_thread_calls(), 'numpy wheels bundle OpenBLAS'
-
-
-def test_prior_around_a_setup_contains_it():
-    setup = CameraSetup(600.0, 0.2, 30.0, 1.0)
-    prior = common.prior_around(setup)
-    assert prior.focal_px == (setup.focal_px * 0.8, setup.focal_px * 1.2)
-    assert prior.baseline_over_height[0] < 0.2 < prior.baseline_over_height[1]
-    assert prior.tilt_deg == (22.0, 38.0) and prior.vergence_deg == (-1.0, 3.0)
 
 
 def test_mono8_message_decodes_to_the_image():
