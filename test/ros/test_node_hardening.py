@@ -201,9 +201,14 @@ def test_shutdown_with_a_pair_in_flight_logs_no_error(tmp_path, ros_context, ros
             stamp += 100_000_000
             executor.spin_once(timeout_sec=0.1)
         assert time.monotonic() < deadline, 'the node processed no pairs'
-        for pub, offset in zip(pubs, (0, 1000)):   # one more pair, to be taken mid-search
-            pub.publish(_image(noise, stamp + offset, 'cam'))
-        time.sleep(0.3)
+        # Pairs every 20 ms up to the signal: whenever the worker finishes a pair a newer one
+        # is waiting, so a pair is in flight when the signal comes however fast a search is.
+        for _ in range(25):
+            noise = rng.integers(0, 256, (240, 320), np.uint8)
+            for pub, offset in zip(pubs, (0, 1000)):
+                pub.publish(_image(noise, stamp + offset, 'cam'))
+            stamp += 20_000_000
+            time.sleep(0.02)
         proc.send_signal(sig)
         out, err = proc.communicate(timeout=60)
     finally:
