@@ -13,19 +13,18 @@ from dataclasses import dataclass, field, replace
 import math
 import time
 
-import cv2
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.homography import as_homography
 from domplane_ros.core.image import check_gray
-from domplane_ros.core.lines import detect_lines
 from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
 from domplane_ros.core.pyramid import level_homography, motion_to_full, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import camera_motion, predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
+from domplane_ros.stream.detection import detect_features, full_mask
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.trust import TrustGate, Verdict
@@ -187,7 +186,7 @@ class PlanePipeline:
             return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
         work = (WorkingImage.of(left, cfg.features.max_width),
                 WorkingImage.of(right, cfg.features.max_width))
-        feats, track_pts = _detect(*work, cfg)
+        feats, track_pts = detect_features(*work, cfg)
         t1 = time.perf_counter()
         track_pts = self._tracking_points(*work, track_pts)
         motions = self._camera_motions(*work)
@@ -246,7 +245,7 @@ class PlanePipeline:
             out = parallax_mask(left.image, right.image, level_homography(h, scale),
                                 self.config.mask, tuple(f / scale for f in prior.focal_px),
                                 tuple(c / scale for c in prior.principal_point_px))
-            mask, parallax = _full_mask(left, out.labels), out.parallax
+            mask, parallax = full_mask(left, out.labels), out.parallax
             if scale != 1.0:
                 # Working-level pixels to full-resolution pixels (-1: not measured).
                 parallax = np.where(parallax >= 0, parallax * np.float32(scale),
@@ -569,45 +568,6 @@ class _Step:
     initial: PlaneEstimate | None = None
     left: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
     right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
-
-
-def _detect(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfig
-            ) -> tuple[Features, tuple[np.ndarray, np.ndarray]]:
-    """Return corners and segments (full pixels) as ``features.kind`` asks.
-
-    Detected on the working level (:mod:`domplane_ros.core.pyramid`) and scaled to full
-    pixels. Also returns the working-level corners, which the tracker uses.
-    """
-    kind = cfg.features.kind
-    none_pts = np.zeros((0, 2))
-    none_seg = np.zeros((0, 4))
-    if kind == 'lines':
-        corners = (none_pts, none_pts)
-        left_pts = right_pts = none_pts
-    else:
-        corners = (detect_corners(left.image, cfg.features),
-                   detect_corners(right.image, cfg.features))
-        left_pts, right_pts = (_full_corners(image, points)
-                               for image, points in zip((left, right), corners))
-    if kind == 'points':
-        left_seg = right_seg = none_seg
-    else:
-        left_seg = left.scale * detect_lines(left.image, cfg.features)
-        right_seg = right.scale * detect_lines(right.image, cfg.features)
-    return Features(left_pts, right_pts, left_seg, right_seg), corners
-
-
-def _full_corners(image: WorkingImage, corners: np.ndarray) -> np.ndarray:
-    """Return working-level corners in full pixels."""
-    return corners if image.level == 0 else image.scale * corners
-
-
-def _full_mask(image: WorkingImage, mask: np.ndarray) -> np.ndarray:
-    """Return a working-level mask at the full image's size (nearest neighbour)."""
-    if image.level == 0:
-        return mask
-    height, width = image.full.shape
-    return cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)
 
 
 def _timings_ms(t0: float, t1: float, t2: float, t3: float, t4: float) -> dict[str, float]:

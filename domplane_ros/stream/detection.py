@@ -1,0 +1,55 @@
+"""Features of one pair at its working resolution, and the way back to full pixels.
+
+The pipeline detects corners (and line segments) on the working level of each image
+(:mod:`domplane_ros.core.pyramid`, ``features.max_width``); the estimator, the prior, the
+verification and the acceptance checks work in full pixels. These helpers do the detection as
+``features.kind`` asks and scale its results (and the mask) back to the full image.
+"""
+
+from __future__ import annotations
+
+import cv2
+from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.core.features import detect_corners, Features
+from domplane_ros.core.lines import detect_lines
+from domplane_ros.core.pyramid import WorkingImage
+import numpy as np
+
+
+def detect_features(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfig
+                    ) -> tuple[Features, tuple[np.ndarray, np.ndarray]]:
+    """Return corners and segments (full pixels) as ``features.kind`` asks.
+
+    Detected on the working level (:mod:`domplane_ros.core.pyramid`) and scaled to full
+    pixels. Also returns the working-level corners, which the tracker uses.
+    """
+    kind = cfg.features.kind
+    none_pts = np.zeros((0, 2))
+    none_seg = np.zeros((0, 4))
+    if kind == 'lines':
+        corners = (none_pts, none_pts)
+        left_pts = right_pts = none_pts
+    else:
+        corners = (detect_corners(left.image, cfg.features),
+                   detect_corners(right.image, cfg.features))
+        left_pts, right_pts = (full_corners(image, points)
+                               for image, points in zip((left, right), corners))
+    if kind == 'points':
+        left_seg = right_seg = none_seg
+    else:
+        left_seg = left.scale * detect_lines(left.image, cfg.features)
+        right_seg = right.scale * detect_lines(right.image, cfg.features)
+    return Features(left_pts, right_pts, left_seg, right_seg), corners
+
+
+def full_corners(image: WorkingImage, corners: np.ndarray) -> np.ndarray:
+    """Return working-level corners in full pixels."""
+    return corners if image.level == 0 else image.scale * corners
+
+
+def full_mask(image: WorkingImage, mask: np.ndarray) -> np.ndarray:
+    """Return a working-level mask at the full image's size (nearest neighbour)."""
+    if image.level == 0:
+        return mask
+    height, width = image.full.shape
+    return cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)
