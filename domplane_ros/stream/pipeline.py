@@ -398,14 +398,21 @@ class PlanePipeline:
         """Return the refined, unrejected planes of the ``count`` best-screened candidates."""
         prior_search = PriorSearch(problem, self._candidates(size),
                                    self.config.prior.screen_threshold_px)
-        out = []
-        for index in prior_search.ranked()[:count]:
-            result, _ = prior_search.refine(
+        return self._refined(prior_search, prior_search.ranked()[:count], feats, size)[0]
+
+    def _refined(self, prior_search: PriorSearch, indices: list[int], feats: Features,
+                 size: tuple[int, int]) -> tuple[list[PlaneEstimate], str]:
+        """Refine each candidate of ``indices``: the unrejected planes and the last rejection."""
+        out: list[PlaneEstimate] = []
+        rejection = ''
+        for index in indices:
+            result, rejected = prior_search.refine(
                 [index], self.config.estimator,
                 lambda estimate: self._checks.rejection_reason(estimate, feats, size))
+            rejection = rejected or rejection
             if result is not None and result.ok:
                 out.append(result)
-        return out
+        return out, rejection
 
     def _lose_frame(self, step: _Step, prediction: np.ndarray | None) -> None:
         """Failed or suspicious: carry the plane forward (tracking) or give up (searching)."""
@@ -510,14 +517,8 @@ class PlanePipeline:
         chosen = prior_search.ranked(search.tried)[:max(0, min(budget, limit - len(search.tried)))]
         search.tried.update(chosen)
         step.candidates += len(chosen)
-        rejection = ''
-        for index in chosen:
-            result, rejected = prior_search.refine(
-                [index], cfg.estimator,
-                lambda estimate: self._checks.rejection_reason(estimate, feats, size))
-            rejection = rejected or rejection
-            if result is not None and result.ok:
-                pool.append(result)
+        refined, rejection = self._refined(prior_search, chosen, feats, size)
+        pool += refined
         pool += self._coarse_estimates(step, problem, feats, size)
         return pool, rejection, limit
 

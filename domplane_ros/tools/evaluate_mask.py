@@ -205,33 +205,33 @@ def contact_sheet(rows: list[tuple[str, list[np.ndarray]]], tile_width: int = 32
 def evaluate_rendered(seeds: Sequence[int], sheet: list, shown: int = 4
                       ) -> dict[str, list[dict[str, float]]]:
     """Score both masks on rendered scenes; the first ``shown`` go on the contact sheet."""
-    functions = masks()
-    rows: dict[str, list[dict[str, float]]] = {name: [] for name in functions}
-    for index, seed in enumerate(progress(seeds, 'rendered')):
-        frame = random_scene(seed)
-        results = {name: f(frame.left, frame.right, frame.homography)
-                   for name, f in functions.items()}
-        for name, result in results.items():
-            rows[name].append(rendered_scores(frame, result.labels))
-        if index < shown:
-            sheet.append((f'rendered seed {seed} ({frame.floor})',
-                          _tile(frame.left, results['parallax'], results['ncc'].labels)))
-    return rows
+    return _evaluate_frames(seeds, sheet, shown, 'rendered', random_scene, rendered_scores,
+                            lambda seed, frame: f'rendered seed {seed} ({frame.floor})')
 
 
 def evaluate_indoor(seeds: Sequence[int], sheet: list, shown: int = 2
                     ) -> dict[str, list[dict[str, float]]]:
     """Score both masks on the small-baseline indoor head."""
+    return _evaluate_frames(seeds, sheet, shown, 'indoor', indoor_scene, indoor_scores,
+                            lambda seed, frame: f'indoor seed {seed} (b/h 0.075)')
+
+
+def _evaluate_frames(seeds: Sequence[int], sheet: list, shown: int, name: str,
+                     render: Callable[[int], StereoFrame],
+                     score: Callable[[StereoFrame, np.ndarray], dict],
+                     label: Callable[[int, StereoFrame], str]
+                     ) -> dict[str, list[dict[str, float]]]:
+    """Score both masks on ``render(seed)`` frames; the first ``shown`` go on the sheet."""
     functions = masks()
-    rows: dict[str, list[dict[str, float]]] = {name: [] for name in functions}
-    for index, seed in enumerate(progress(seeds, 'indoor')):
-        frame = indoor_scene(seed)
-        results = {name: f(frame.left, frame.right, frame.homography)
-                   for name, f in functions.items()}
-        for name, result in results.items():
-            rows[name].append(indoor_scores(frame, result.labels))
+    rows: dict[str, list[dict[str, float]]] = {mask: [] for mask in functions}
+    for index, seed in enumerate(progress(seeds, name)):
+        frame = render(seed)
+        results = {mask: f(frame.left, frame.right, frame.homography)
+                   for mask, f in functions.items()}
+        for mask, result in results.items():
+            rows[mask].append(score(frame, result.labels))
         if index < shown:
-            sheet.append((f'indoor seed {seed} (b/h 0.075)',
+            sheet.append((label(seed, frame),
                           _tile(frame.left, results['parallax'], results['ncc'].labels)))
     return rows
 
