@@ -45,7 +45,8 @@ from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ['FailedEstimate', 'PlaneEstimate', 'TwoStep', 'estimate_plane', 'gnc_scales']
+__all__ = ['FailedEstimate', 'PlaneEstimate', 'TwoStep', 'can_widen', 'estimate_plane',
+           'gnc_scales']
 
 _GLOBAL_STEP_ITERATIONS = 2
 _POLISH_ROUNDS = 2
@@ -62,25 +63,47 @@ def _options(options: EstimatorConfig | None, overrides: dict[str, Any]) -> Esti
     return replace(base, **overrides) if overrides else base
 
 
-# Potentials whose scale is graduated (GNC): from ``gnc_start_px`` down to the threshold.
-# Graduating the truncated quadratic too widens its basin on point sets (0 % -> 95-100 %
-# converged from 20 px corner displacements, spread, clustered, half off-plane, 30 % missing,
-# sparse) but on rendered pairs its wide stages slide into periodic look-alikes (cold start
-# solved 73 % -> 47 %, planks 64 % -> 21 %, one run on seeds 0-29): not done.
+# Potentials whose scale is always graduated (GNC): from ``gnc_start_px`` down to the
+# threshold.
 GRADUATED = ('geman_mcclure',)
+# Potentials graduated only from a warm start that looks far (:meth:`TwoStep.start_looks_far`).
+# Graduating the truncated quadratic always widens its basin on point sets (0 % -> 95-100 %
+# converged from 20 px corner displacements, spread, clustered, half off-plane, 30 % missing,
+# sparse) but from the prior's candidates and from good starts on rendered pairs its wide
+# stages slide into periodic look-alikes (cold start solved 73 % -> 47 %, planks 64 % -> 21 %,
+# one run on seeds 0-29): so only a far warm start is graduated.
+GRADUATED_WHEN_FAR = ('truncated_quadratic',)
+# A start looks far when its support (features within the threshold of their closest partner)
+# is below this multiple of the mean support of the same start shifted by
+# FAR_SHIFT_THRESHOLDS thresholds up, down, left and right (the support by chance).
+FAR_SUPPORT_RATIO = 2.5
+FAR_SHIFT_THRESHOLDS = 4.0
 
 
-def gnc_scales(options: EstimatorConfig) -> list[float]:
+def can_widen(options: EstimatorConfig) -> bool:
+    """Return whether a far start graduates the potential of ``options`` (see ``widen``).
+
+    Only the potentials of ``GRADUATED_WHEN_FAR``, and only with ``gnc_start_px`` at least
+    twice the threshold (a threshold near the start scale is wide already).
+    """
+    return (options.potential in GRADUATED_WHEN_FAR
+            and options.gnc_start_px >= 2.0 * options.threshold_px)
+
+
+def gnc_scales(options: EstimatorConfig, far: bool = False) -> list[float]:
     """Return the scales (pixels) of the stages: one for convex potentials, several for GNC.
 
     Args:
         options: Estimator settings.
+        far: The start looks far: the potentials of ``GRADUATED_WHEN_FAR`` are graduated too.
 
     Returns:
         Decreasing scales ending at ``options.threshold_px``.
 
     """
-    if options.potential not in GRADUATED or options.gnc_start_px <= options.threshold_px:
+    graduated = options.potential in GRADUATED or (far and
+                                                   options.potential in GRADUATED_WHEN_FAR)
+    if not graduated or options.gnc_start_px <= options.threshold_px:
         return [options.threshold_px]
     scales = []
     s = options.gnc_start_px
@@ -325,13 +348,40 @@ class TwoStep:
         tree = cKDTree(right) if right.shape[0] else None
         return cls(left, right, tree, left_seg, LineMatcher(right_seg), line_weight)
 
-    def estimate(self, init: np.ndarray, options: EstimatorConfig
-                 ) -> PlaneEstimate | FailedEstimate:
+    def start_looks_far(self, h: np.ndarray, threshold_px: float) -> bool:
+        """Return whether the start ``h`` has no more support than a start off by chance.
+
+        The support is the fraction of features whose prediction lies within
+        ``threshold_px`` of its closest partner. A start near the plane has several times the
+        support it has when its predictions are shifted by ``FAR_SHIFT_THRESHOLDS``
+        thresholds (the support by chance, which clustered or dense features raise); a start
+        20 px off does not.
+
+        Args:
+            h: (3, 3) float64 start.
+            threshold_px: The robust threshold, pixels.
+
+        """
+        pred = self.apply(h)
+        support = np.mean(self.match(pred, threshold_px)[0] < threshold_px)
+        shift = FAR_SHIFT_THRESHOLDS * threshold_px
+        chance = np.mean([np.mean(self.match(pred + offset, threshold_px)[0] < threshold_px)
+                          for offset in ((shift, 0.0), (-shift, 0.0), (0.0, shift),
+                                         (0.0, -shift))])
+        return bool(support < FAR_SUPPORT_RATIO * chance)
+
+    def estimate(self, init: np.ndarray, options: EstimatorConfig, *,
+                 widen: bool | None = None) -> PlaneEstimate | FailedEstimate:
         """Run the iteration from ``init`` (the warm start), then the Euclidean refinement.
 
         Args:
             init: (3, 3) float64 initial homography.
             options: Estimator settings (its ``line_weight`` was fixed at construction).
+            widen: Whether the truncated quadratic is graduated from ``options.gnc_start_px``
+                (GNC), which widens its basin. None (a warm start): only when the start
+                looks far (:meth:`start_looks_far`) or the plain run fails. False: never (the
+                prior's candidates, whose search covers far starts and whose look-alikes a
+                wide stage slides into). True: always. Other potentials ignore it.
 
         Returns:
             :class:`PlaneEstimate`, or :class:`FailedEstimate` for a singular or non-finite
@@ -341,12 +391,22 @@ class TwoStep:
         reason = check_homography(init)
         if reason:
             return FailedEstimate(f'initial {reason}')
+        h = normalise_scale(init)
+        if not can_widen(options) or widen is not None:
+            return self._estimate_from(h, options, can_widen(options) and bool(widen))
+        if self.start_looks_far(h, options.threshold_px):
+            return self._estimate_from(h, options, True)
+        result = self._estimate_from(h, options, False)
+        return result if result.ok else self._estimate_from(h, options, True)
+
+    def _estimate_from(self, h: np.ndarray, options: EstimatorConfig, far: bool
+                       ) -> PlaneEstimate | FailedEstimate:
+        """Iterate every stage from the valid start ``h``, refine, and say how it ended."""
         energies: list[float] = []
         stages: list[int] = []
-        h = normalise_scale(init)
         iterations = 0
         converged = False
-        for k, scale in enumerate(gnc_scales(options)):
+        for k, scale in enumerate(gnc_scales(options, far)):
             potential = make_potential(options.potential, options.lambda_weight, scale)
             before = len(energies)
             h, its, converged, matched = self.run_stage(h, potential, options, energies)

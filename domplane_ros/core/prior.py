@@ -283,7 +283,7 @@ class PriorSearch:
         """
         rejected = ''
         for index in indices:
-            result = self.problem.estimate(self.candidates[index], options)
+            result = self.problem.estimate(self.candidates[index], options, widen=False)
             reason = rejection(result) if rejection is not None and result.ok else ''
             if reason:
                 rejected = reason

@@ -47,6 +47,14 @@ class PointScene(_SceneTruth):
     """
 
 
+# Kinds of point sets for the warm-start basin, as keyword arguments of :func:`point_scene`
+# (``n_points`` 500 unless given): spread over the image (30 % off-plane, 10 % missing), in 5
+# clusters, half off the plane, 30 % missing detections, and 150 points only.
+POINT_SET_KINDS: dict[str, dict[str, int | float]] = {
+    'spread': {}, 'clustered': {'clusters': 5}, 'half_off_plane': {'outlier_fraction': 0.5},
+    'missing_30': {'missing_fraction': 0.3}, 'sparse_150': {'n_points': 150}}
+
+
 def random_plane_homography(rng: np.random.Generator, width: int = 640,
                             height: int = 480) -> np.ndarray:
     """Draw a plausible stereo-head ground-plane homography (focal 500-800 px, tilt 15-45)."""

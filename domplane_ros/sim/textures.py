@@ -20,7 +20,12 @@ FLOOR_KINDS = ('random', 'tiles', 'planks', 'checker')
 # all structure is in straight lines (the joints). Not drawn by ``random_scene(floor=None)``,
 # so existing seeds keep their floors; ask for them by name.
 PLAIN_FLOOR_KINDS = ('tiles_plain', 'planks_plain')
-ALL_FLOOR_KINDS = FLOOR_KINDS + PLAIN_FLOOR_KINDS
+# Weakly textured tiled floors unlike ``tiles_plain``: tiles of 32, 64 and 256 texels (16 cm,
+# 32 cm and 1.28 m at camera height 1), faint joints and a faint mottled surface (see
+# :func:`_faint_tiles_texture`). Also asked for by name only.
+FAINT_TILE_SIZES = {'tiles_faint_32': 32, 'tiles_faint_64': 64, 'tiles_faint_256': 256}
+FAINT_TILE_KINDS = tuple(FAINT_TILE_SIZES)
+ALL_FLOOR_KINDS = FLOOR_KINDS + PLAIN_FLOOR_KINDS + FAINT_TILE_KINDS
 
 # Texture rasters: size in texels (a power of two, so the mip pyramid halves exactly) and the
 # world size of one texel (camera height = 1).
@@ -76,6 +81,8 @@ def _floor_texture(kind: str, variant: int) -> np.ndarray:
     n = _FLOOR_TEXELS
     if kind in PLAIN_FLOOR_KINDS:
         return _plain_floor_texture(kind, rng, n)
+    if kind in FAINT_TILE_KINDS:
+        return _faint_tiles_texture(FAINT_TILE_SIZES[kind], rng, n)
     if kind == 'random':
         return _random_texture(rng, n, ((16, 1.0), (64, 0.8), (256, 0.6), (512, 0.35)),
                                sharpness=1.6, grain=0.04)
@@ -117,6 +124,23 @@ def _plain_floor_texture(kind: str, rng: np.random.Generator, n: int) -> np.ndar
         return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
     tex = np.full((n, n), 0.55, np.float32) + faint
     _draw_planks(tex, rng, (300, 700), 0.22)
+    return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
+
+
+def _faint_tiles_texture(tile: int, rng: np.random.Generator, n: int) -> np.ndarray:
+    """Return a weakly textured tiled floor: faint joints on a faintly mottled surface.
+
+    Tiles of ``tile`` texels, each a shade of 0.62 +- 1.5 %, with a low-frequency mottle of
+    1.5 % and fine grain of 1 %; the 2-texel joints are light grout (0.52, against
+    ``tiles_plain``'s dark 0.28), so the joints give weak edges and corners where they cross.
+    """
+    shades = 0.62 + 0.015 * rng.standard_normal((n // tile, n // tile))
+    tex = np.kron(shades, np.ones((tile, tile))).astype(np.float32)
+    tex += 0.015 * _normalise(_periodic_noise(rng, n, 32))
+    tex += 0.01 * _normalise(_periodic_noise(rng, n, n // 2))
+    on_joint = np.arange(n) % tile < 2
+    tex[on_joint, :] = 0.52
+    tex[:, on_joint] = 0.52
     return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
 
 

@@ -99,7 +99,8 @@ class AcceptanceChecks:
         return ''
 
     def suspicion_reason(self, estimate: PlaneEstimate, n_points: int, size: tuple[int, int],
-                         last_energy_per_point: float | None, energy: bool = True) -> str:
+                         last_energy_per_point: float | None, energy: bool = True,
+                         count: bool = True) -> str:
         """Return why an estimate should not be trusted ('' if it can be)."""
         cfg = self._config().pipeline
         if energy and last_energy_per_point is not None:
@@ -108,7 +109,7 @@ class AcceptanceChecks:
             if per_point > limit:
                 return (f'energy jump: {per_point:.3g} per point > {cfg.max_energy_ratio} x '
                         f'last {last_energy_per_point:.3g}')
-        return self.bounds_reason(estimate.homography, size)
+        return self.bounds_reason(estimate.homography, size, count)
 
     def bounds_reason(self, homography: np.ndarray, size: tuple[int, int],
                       count: bool = True) -> str:

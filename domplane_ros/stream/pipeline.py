@@ -14,7 +14,7 @@ import math
 import time
 
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.core.estimator import TwoStep
+from domplane_ros.core.estimator import can_widen, GRADUATED, TwoStep
 from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.homography import as_homography
 from domplane_ros.core.image import check_gray
@@ -333,30 +333,47 @@ class PlanePipeline:
                   else ('last', self._last_h)]
         reason = self._checks.too_few_reason(feats)
         for name, init in starts if not reason else ():
-            wide = fast and prediction is None
-            estimate = self._warm_estimate(problem, init, wide)
+            # Plain first (a good start costs nothing more); where that is refused, once more
+            # with the potential graduated from the same start (a far start's wide basin).
+            tries = (False, True) if can_widen(self.config.estimator) else (False,)
+            outcomes = []
+            for widen in tries:
+                estimate = self._warm_estimate(problem, init, fast and prediction is None,
+                                               widen)
+                outcomes.append((estimate, *self._warm_check(step, estimate, feats, size,
+                                                             fast, count=not widen)))
+                if not outcomes[-1][1]:
+                    break
+            estimate, reason, verdict = outcomes[-1] if not outcomes[-1][1] else outcomes[0]
             step.estimate, step.warm_start = estimate, name
-            if not estimate.ok:
-                reason = estimate.reason
-                continue
-            # A fast head (joint input) may change the energy legitimately: no energy check.
-            reason = self._checks.suspicion_reason(estimate, feats.n_left, size,
-                                                   self._last_energy_per_point, energy=not fast)
+            if verdict is not None and not verdict.accepted:
+                # A verified lock does not slide into a look-alike: search at once.
+                step.reason = verdict.reason
+                self._start_search()
+                return
             if not reason:
-                reason = self._checks.input_problem(estimate, feats.left_points, size)
-            if not reason:
-                verdict = self._trust.judge(step.left, step.right, estimate.homography,
-                                            self.config.features.roi, locked=True)
-                if not verdict.accepted:
-                    # A verified lock does not slide into a look-alike: search at once.
-                    step.reason = verdict.reason
-                    self._start_search()
-                    return
                 self._verified(step, estimate, verdict)
                 self._challenge(step, verdict, problem, feats, size)
                 return
         step.reason = reason
         self._lose_frame(step, prediction)
+
+    def _warm_check(self, step: _Step, estimate: PlaneEstimate | FailedEstimate,
+                    feats: Features, size: tuple[int, int], fast: bool, count: bool
+                    ) -> tuple[str, Verdict | None]:
+        """Return why a warm estimate is refused ('' if not) and the verification's verdict."""
+        if not estimate.ok:
+            return estimate.reason, None
+        # A fast head (joint input) may change the energy legitimately: no energy check.
+        reason = self._checks.suspicion_reason(estimate, feats.n_left, size,
+                                               self._last_energy_per_point, energy=not fast,
+                                               count=count)
+        reason = reason or self._checks.input_problem(estimate, feats.left_points, size, count)
+        if reason:
+            return reason, None
+        verdict = self._trust.judge(step.left, step.right, estimate.homography,
+                                    self.config.features.roi, locked=True)
+        return verdict.reason, verdict
 
     def _verified(self, step: _Step, estimate: PlaneEstimate, verdict: Verdict) -> None:
         """Publish a verified plane: lock on it."""
@@ -388,7 +405,7 @@ class PlanePipeline:
         """Return the refined, unrejected planes of the coarse photometric alignment."""
         out = []
         for start in self._trust.coarse_candidates(step.left, step.right):
-            result = problem.estimate(start, self.config.estimator)
+            result = problem.estimate(start, self.config.estimator, widen=False)
             if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)
         return out
@@ -428,20 +445,22 @@ class PlanePipeline:
         self._start_search()
 
     def _warm_estimate(self, problem: TwoStep | FailedEstimate, init: np.ndarray,
-                       wide: bool) -> PlaneEstimate | FailedEstimate:
+                       wide: bool, widen: bool = False) -> PlaneEstimate | FailedEstimate:
         if isinstance(problem, FailedEstimate):
             return problem
         cfg = self.config
-        warm = replace(cfg.estimator, gnc_start_px=min(cfg.estimator.gnc_start_px,
-                                                       cfg.pipeline.warm_gnc_start_px))
+        warm = cfg.estimator
+        if warm.potential in GRADUATED:
+            warm = replace(warm, gnc_start_px=min(warm.gnc_start_px,
+                                                  cfg.pipeline.warm_gnc_start_px))
         if wide:
             # Fast head and no prediction: a first pass with a wide basin.
             wide_options = replace(cfg.estimator, threshold_px=min(
                 200.0, _WIDE_BASIN_FACTOR * cfg.estimator.threshold_px))
-            first = problem.estimate(init, wide_options)
+            first = problem.estimate(init, wide_options, widen=False)
             if first.ok:
                 init = first.homography
-        return problem.estimate(init, warm)
+        return problem.estimate(init, warm, widen=widen)
 
     def _problem(self, feats: Features) -> TwoStep | FailedEstimate:
         """Return the two-step iteration over this frame's features, or why there is none."""
@@ -503,8 +522,8 @@ class PlanePipeline:
             search.initial_tried = True
             budget -= 1
             step.candidates += 1
-            first = problem.estimate(as_homography(cfg.initial_homography,
-                                                   'initial_homography'), cfg.estimator)
+            init = as_homography(cfg.initial_homography, 'initial_homography')
+            first = problem.estimate(init, cfg.estimator, widen=False)
             if first.ok and not self._checks.rejection_reason(first, feats, size):
                 pool.append(first)
                 step.initial = first

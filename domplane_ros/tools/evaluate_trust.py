@@ -12,7 +12,10 @@ OpenCV ORB + MAGSAC++ runs on the same pairs in the same run:
   10 px apart);
 * ``swapped``: the same scenes with left and right exchanged (truth ``H^-1``);
 * ``cuts``: 8 frames of one sequence then 8 of an unrelated one (scene, floor and set-up),
-  through one pipeline: the frames after the cut, and the pairs to re-lock.
+  through one pipeline: the frames after the cut, and the pairs to re-lock;
+* ``tiles_faint_*``: weakly textured tiled floors of three tile sizes
+  (:data:`~domplane_ros.sim.textures.FAINT_TILE_KINDS`), one per seed in turn, cold start as
+  ``cold`` with ``features.kind: both`` (corners and line segments), the default otherwise.
 
 A published plane is *correct* when its mean transfer error over the visible floor is below
 1 px, *wrong* when above 5 px. Precision = correct / published; recall = correct / pairs.
@@ -23,7 +26,7 @@ Tuning seeds start at 0; ``--held-out`` uses seeds from 1000, kept out of tuning
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 import math
 from pathlib import Path
 import sys
@@ -35,6 +38,7 @@ from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, rough_rig,
                                    swapped)
+from domplane_ros.sim.textures import FAINT_TILE_KINDS
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress
 from domplane_ros.tools.evaluation.methods import run_orb_magsac
@@ -121,6 +125,22 @@ def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
     return tallies
 
 
+def _faint_tile_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
+                      ) -> dict[tuple[str, str], Tally]:
+    """Cold start on the faint tiled floors, ``features.kind: both``; one row per tile size."""
+    both = replace(config, features=replace(config.features, kind='both'))
+    tallies: dict[tuple[str, str], Tally] = {}
+    for seed in progress(seeds, 'faint tiles'):
+        floor = FAINT_TILE_KINDS[seed % len(FAINT_TILE_KINDS)]
+        frame = random_scene(seed, floor=floor)
+        error, ms = _ours_single(frame, both)
+        tallies.setdefault((floor, 'ours (both)'), Tally()).add(error, ms)
+        if orb:
+            error, ms = _orb_single(frame)
+            tallies.setdefault((floor, 'orb_magsac'), Tally()).add(error, ms)
+    return dict(sorted(tallies.items()))
+
+
 def _cut_case(seeds: Sequence[int], config: PlaneNodeConfig) -> Tally:
     """Frames after the cut count; relock = pairs after the cut until a correct plane."""
     tally = Tally()
@@ -162,6 +182,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     with one_core():
         tallies = _single_cases(seeds, one_shot_search(config), not args.no_orb)
         tallies[('cuts', 'ours')] = _cut_case(seeds[:max(1, args.pairs // 4)], config)
+        tallies.update(_faint_tile_cases(seeds, one_shot_search(config), not args.no_orb))
     kind = 'tuning' if first < 1000 else 'held out'
     lines = [f'machine: {machine_name()}', f'seeds {seeds[0]}..{seeds[-1]} ({kind}); '
              'prior: the documented default; correct < 1 px, wrong > 5 px',

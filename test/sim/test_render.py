@@ -6,7 +6,8 @@ import cv2
 from domplane_ros.core import prior
 from domplane_ros.sim.model import BACKGROUNDS, Box, CameraSetup, StereoFrame
 from domplane_ros.sim.render import render_stereo
-from domplane_ros.sim.textures import FLOOR_KINDS
+from domplane_ros.sim.textures import (FAINT_TILE_KINDS, FAINT_TILE_SIZES, FLOOR_KINDS,
+                                       texture_pyramid)
 import numpy as np
 import pytest
 
@@ -144,3 +145,22 @@ def test_bad_arguments_raise_value_error():
         CameraSetup(0.0, 0.1, 20.0, 0.0)
     with pytest.raises(ValueError, match='finite'):
         CameraSetup(500.0, float('nan'), 20.0, 0.0)
+
+
+@pytest.mark.parametrize('floor', FAINT_TILE_KINDS)
+def test_faint_tiles_have_their_tile_size_faint_texture_and_match_after_warp(floor):
+    raster = texture_pyramid(floor, 0)[0]
+    tile = FAINT_TILE_SIZES[floor]
+    rows = raster.mean(axis=1)
+    joint_rows = rows[np.arange(raster.shape[0]) % tile == 0]
+    mid_rows = rows[np.arange(raster.shape[0]) % tile == tile // 2]
+    # Joints every `tile` texels, lighter than tiles_plain's dark ones; faint tile surface.
+    assert np.all(joint_rows < mid_rows.min() - 0.03)
+    assert joint_rows.mean() > texture_pyramid('tiles_plain', 0)[0].min() + 0.15
+    interior = raster[tile // 4:3 * tile // 4, tile // 4:3 * tile // 4]
+    assert interior.std() < 0.04
+    frame = render_stereo(SETUP, BOXES, floor=floor, noise_std=0.0, seed=3)
+    warped = _warp_right_to_left(frame).astype(np.float64)
+    plane = _erode(frame.plane_left & frame.visible_in_right, 2) & _interior(
+        frame.left.shape, 4)
+    assert np.abs(warped - frame.left)[plane].mean() < 1.5

@@ -76,10 +76,19 @@ def test_prediction_keeps_the_lock_where_the_last_homography_loses_it(fast_seque
         (i, r.state, round(e, 2)) for i, (r, e) in enumerate(predicted)]
     assert all(r.warm_start == 'prediction' for r, _ in predicted[first + 1:])
     assert all(r.state == LOCKED for r, _ in predicted[first:])
-    # The same frames with the last homography as the warm start: the lock is lost (no plane,
-    # or a plane 1 px or more from the truth) in some frames.
-    lost = [i for i, (r, e) in enumerate(last_only) if i > first and not _locked(r, e)]
-    assert len(lost) >= 3, [(i, r.state, round(e, 2)) for i, (r, e) in enumerate(last_only)]
+    # A good prediction costs nothing extra: the plain potential, one stage, every frame.
+    assert all(_stages(r) == 1 for r, _ in predicted[first + 1:])
+    # The same frames with the last homography as the warm start: the plain potential loses
+    # the lock in some frames (it was lost there before the graduated retry); the retry,
+    # graduated from the same start, keeps it, and nothing wrong is published.
+    retried = [i for i, (r, e) in enumerate(last_only) if i > first and _stages(r) > 1]
+    assert len(retried) >= 3, [(i, r.state, round(e, 2)) for i, (r, e) in enumerate(last_only)]
+    assert all(_locked(r, e) and r.warm_start == 'last' for r, e in last_only[first + 1:])
+
+
+def _stages(result):
+    """Return the number of potential stages of a frame's estimate (1: not graduated)."""
+    return int(result.estimate.stage_trace.max()) + 1
 
 
 def test_relock_within_five_frames_after_a_forced_loss(fast_sequence):
@@ -184,10 +193,14 @@ def test_fast_joint_hint_widens_the_basin_of_the_last_homography(fast_sequence):
             result = pipeline.process(frame.left, frame.right, i * STEP_NS, joint_speed=speed)
             error = transfer_error_px(result.homography, frame, points)
             assert not result.ok or error < 1.0, (i, speed, error)  # nothing wrong published
-            out.append((_locked(result, error), result.warm_start))
-    first = next(i for i, (locked, _) in enumerate(hinted) if locked)
-    assert all(locked and start == 'last' for locked, start in hinted[first + 1:]), hinted
-    held = [locked and start == 'last' for locked, start in plain[first + 1:]]
+            out.append((_locked(result, error), result.warm_start, _stages(result)))
+    first = next(i for i, (locked, _, _) in enumerate(hinted) if locked)
+    assert all(locked and start == 'last' and stages == 1
+               for locked, start, stages in hinted[first + 1:]), hinted
+    # Without the hint the plain potential loses the warm start in more than 3 pairs; the
+    # graduated retry from the same start holds them (see the test above).
+    held = [locked and start == 'last' and stages == 1 for locked, start, stages in
+            plain[first + 1:]]
     assert held.count(False) > 3, plain
 
 
