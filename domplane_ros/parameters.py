@@ -85,10 +85,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Weight of a line segment relative to a point in the joint energy (features.kind '
               'both).', 0.01, 100.0),
     ParamSpec('estimator.gnc_start_px', 24.0, 'float',
-              'Geman-McClure only: initial (wide) scale of graduated non-convexity, pixels.',
-              0.1, 500.0),
+              'Initial (wide) scale of graduated non-convexity, pixels: always for '
+              'geman_mcclure; for truncated_quadratic only from a warm start that looks far '
+              '(support near chance, or the plain run refused), and only if at least twice '
+              'estimator.threshold_px.', 0.1, 500.0),
     ParamSpec('estimator.gnc_factor', 0.5, 'float',
-              'Geman-McClure only: factor by which the scale shrinks per stage.', 0.05, 0.95),
+              'Factor by which the graduated scale shrinks per stage.', 0.05, 0.95),
     ParamSpec('estimator.max_iterations', 60, 'int',
               'Iteration cap of one two-step run (per GNC stage).', 1, 10000),
     ParamSpec('estimator.tolerance_px', 0.05, 'float',
