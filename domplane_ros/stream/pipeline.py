@@ -16,7 +16,7 @@ import time
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import detect_corners, Features
-from domplane_ros.core.homography import as_homography
+from domplane_ros.core.homography import as_homography, corner_distance_px
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
@@ -45,6 +45,10 @@ _WIDE_BASIN_FACTOR = 4.0
 # Prior candidates (best screening energy first) refined as challengers beside the coarse
 # alignment's planes: the coarse flow misses floors that the prior's screening finds.
 CHALLENGE_PRIOR_CANDIDATES = 2
+# A challenger's start this close to the lock at the image corners (pixels) is not refined:
+# it would converge to the lock (the default potential's basin is ~10 px, docs/BENCHMARKS.md);
+# a look-alike one plank or tile off lies 20-80 px away.
+NEAR_LOCK_PX = 8.0
 
 
 @dataclass
@@ -58,6 +62,7 @@ class PipelineStats:
     resets: int = 0
     predictions: int = 0
     candidates: int = 0
+    carried: int = 0  # pairs whose corners were carried from an earlier pair, not detected
 
 
 @dataclass
@@ -178,6 +183,7 @@ class PlanePipeline:
         work = (WorkingImage.of(left, cfg.features.max_width),
                 WorkingImage.of(right, cfg.features.max_width))
         feats, track_pts, motions, carried, spans = self._features(*work)
+        self.stats.carried += carried is not None
         t3 = time.perf_counter()
         step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
         t4 = time.perf_counter()
@@ -367,7 +373,8 @@ class PlanePipeline:
         """
         if not self._trust.challenge_due() or isinstance(problem, FailedEstimate):
             return
-        pool = self._coarse_estimates(step, problem, feats, size)
+        lock_h = step.estimate.homography if step.estimate is not None else None
+        pool = self._coarse_estimates(step, problem, feats, size, lock_h)
         pool += self._prior_estimates(problem, feats, size, CHALLENGE_PRIOR_CANDIDATES)
         best, verdict, _ = self._trust.pick(step.left, step.right, pool,
                                             self.config.features.roi)
@@ -377,10 +384,22 @@ class PlanePipeline:
             self._verified(step, best, verdict)
 
     def _coarse_estimates(self, step: _Step, problem: TwoStep, feats: Features,
-                          size: tuple[int, int]) -> list[PlaneEstimate]:
-        """Return the refined, unrejected planes of the coarse photometric alignment."""
+                          size: tuple[int, int], lock: np.ndarray | None = None
+                          ) -> list[PlaneEstimate]:
+        """Return the refined, unrejected planes of the coarse photometric alignment.
+
+        With a ``lock`` (a challenge), starts within :data:`NEAR_LOCK_PX` of it at the image
+        corners are not refined: they converge to the lock, which is verified already
+        (measured: starts 1.8 to 11.8 px from the lock ended within 0.22 px of it); nor are
+        starts within that distance of a start already refined.
+        """
         out = []
+        refined: list[np.ndarray] = [] if lock is None else [lock]
         for start in self._trust.coarse_candidates(step.left, step.right):
+            if any(corner_distance_px(start, other, *size) < NEAR_LOCK_PX for other in refined):
+                continue
+            if lock is not None:
+                refined.append(start)
             result = problem.estimate(start, self.config.estimator)
             if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)
