@@ -66,6 +66,9 @@ _REGULARISER = 2.0
 # right image is plane, and that outline has at least this many pixels.
 _FILL_OUTLINE_SHARE = 0.95
 _FILL_MIN_OUTLINE = 4
+# A pixel is inside the right image when it maps this many working pixels inside its border,
+# so that every full-resolution pixel a working pixel covers maps inside too.
+_INSIDE_MARGIN_PX = 1.0
 # Working images smaller than twice this (pixels) get DIS at their own size, smaller than
 # it none.
 _DIS_MIN_SIZE = 32
@@ -238,23 +241,31 @@ def _warp_to_left(right: np.ndarray, homography: np.ndarray, size: tuple[int, in
     A window is valid when all its pixels map inside the right image (with all four bilinear
     neighbours inside). The inside region is the right image's outline mapped into the left
     view (a convex quadrilateral when no corner crosses the line at infinity; otherwise the
-    right image's footprint is warped pixel by pixel).
+    right image's footprint is warped pixel by pixel). The left image's own border does not
+    shrink it: the window statistics reflect both images there alike.
     """
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     warped = cv2.warpPerspective(right, homography, size, flags=flags,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    inside = _inside(right.shape, homography, size)
     kernel = np.ones((window + 2, window + 2), np.uint8)
-    valid = cv2.erode(inside, kernel, borderType=cv2.BORDER_CONSTANT, borderValue=0) == 255
+    valid = cv2.erode(_inside(right.shape, homography, size, 0.0), kernel,
+                      borderType=cv2.BORDER_CONSTANT, borderValue=255) == 255
+    valid &= _inside(right.shape, homography, size, _INSIDE_MARGIN_PX) == 255
     return warped, valid
 
 
-def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[int, int]
-            ) -> np.ndarray:
-    """Return the (h, w) uint8 mask (255) of left pixels mapped inside the right image."""
+def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[int, int],
+            margin: float) -> np.ndarray:
+    """Return the (h, w) uint8 mask (255) of left pixels mapped inside the right image.
+
+    The right image's outline is taken ``margin`` pixels inside its border.
+    """
     height, width = right_shape
-    corners = np.array([[0.0, 0.0, 1.0], [width - 1.0, 0.0, 1.0],
-                        [width - 1.0, height - 1.0, 1.0], [0.0, height - 1.0, 1.0]])
+    low, high_x, high_y = margin, width - 1.0 - margin, height - 1.0 - margin
+    if high_x < low or high_y < low:
+        return np.zeros((size[1], size[0]), np.uint8)
+    corners = np.array([[low, low, 1.0], [high_x, low, 1.0], [high_x, high_y, 1.0],
+                        [low, high_y, 1.0]])
     mapped = np.linalg.solve(homography, corners.T).T
     if np.all(mapped[:, 2] > 1e-9):
         quad = mapped[:, :2] / mapped[:, 2:]
@@ -263,7 +274,9 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
             cv2.fillConvexPoly(inside, np.round(quad * 16).astype(np.int32), 255,
                                lineType=cv2.LINE_8, shift=4)
             return inside
-    return cv2.warpPerspective(np.full(right_shape, 255, np.uint8), homography, size,
+    footprint = np.zeros(right_shape, np.uint8)
+    footprint[int(math.ceil(low)):int(high_y) + 1, int(math.ceil(low)):int(high_x) + 1] = 255
+    return cv2.warpPerspective(footprint, homography, size,
                                flags=cv2.INTER_NEAREST | cv2.WARP_INVERSE_MAP,
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
