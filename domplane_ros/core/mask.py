@@ -69,6 +69,9 @@ _FILL_MIN_OUTLINE = 4
 # A pixel is inside the right image when it maps this many working pixels inside its border,
 # so that every full-resolution pixel a working pixel covers maps inside too.
 _INSIDE_MARGIN_PX = 1.0
+# DIS settings over the ultrafast preset (see _dis_flow).
+_DIS_FINEST_SCALE = 1
+_DIS_PATCH_STRIDE = 8
 # Working images smaller than twice this (pixels) get DIS at their own size, smaller than
 # it none.
 _DIS_MIN_SIZE = 32
@@ -301,12 +304,21 @@ class _LocalFit:
 
 
 def _dis_flow() -> cv2.DISOpticalFlow:
-    """Return a new DIS optical flow object (ultrafast preset).
+    """Return a new DIS optical flow object (ultrafast preset, finest scale 1, stride 8).
+
+    The preset's finest scale 2 leaves one flow vector per 16 working pixels at the half
+    size it runs on: tall near objects (poles, boxes) then drag the ground's flow by several
+    pixels (median 3.3 working pixels on rendered seed 3's floor). Finest scale 1 with
+    non-overlapping 8-pixel patches measures the ground within 0.1-0.2 px in the median for
+    about 0.1 ms more at 640x480.
 
     A new one per call (creating it costs microseconds): a reused object keeps state between
     calls on small images, so the same pair would not always give the same mask.
     """
-    return cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST)
+    flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST)
+    flow.setFinestScale(_DIS_FINEST_SCALE)
+    flow.setPatchStride(_DIS_PATCH_STRIDE)
+    return flow
 
 
 def _local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> _LocalFit:
