@@ -69,6 +69,7 @@ _FILL_MIN_OUTLINE = 4
 # A pixel is inside the right image when it maps this many working pixels inside its border,
 # so that every full-resolution pixel a working pixel covers maps inside too.
 _INSIDE_MARGIN_PX = 1.0
+_SQUARE_3 = np.ones((3, 3), np.uint8)
 # DIS settings over the ultrafast preset (see _dis_flow).
 _DIS_FINEST_SCALE = 1
 _DIS_PATCH_STRIDE = 8
@@ -211,9 +212,8 @@ def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     hom_small = scale_right @ hom @ np.linalg.inv(scale_left)
     if not np.all(np.isfinite(hom_small)):
         raise ValueError('homography is not invertible at mask scale')
-    window = int(config.window_px)
-    warped, valid = _warp_to_left(right_small, hom_small, (small_w, small_h), window)
-    fit = _local_fit(left_small, warped, window)
+    warped, valid = _warp_to_left(left_small, right_small, hom_small, (small_w, small_h))
+    fit = _local_fit(left_small, warped, int(config.window_px))
     # Full-resolution pixels per working pixel along x (the epipolar direction).
     px_per_working = width / small_w
     # The camera model has one calibration for both cameras: a right image of another size
@@ -237,22 +237,25 @@ def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     return parallax_mask(left, right, homography, config, focal_px).labels
 
 
-def _warp_to_left(right: np.ndarray, homography: np.ndarray, size: tuple[int, int],
-                  window: int) -> tuple[np.ndarray, np.ndarray]:
-    """Return the right image warped into the left view, and the (h, w) bool valid windows.
+def _warp_to_left(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                  size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Return the right image warped into the left view, and the (h, w) bool valid pixels.
 
-    A window is valid when all its pixels map inside the right image (with all four bilinear
-    neighbours inside). The inside region is the right image's outline mapped into the left
-    view (a convex quadrilateral when no corner crosses the line at infinity; otherwise the
-    right image's footprint is warped pixel by pixel). The left image's own border does not
-    shrink it: the window statistics reflect both images there alike.
+    A pixel is valid when it and its 8 neighbours map inside the right image (the right
+    image's outline mapped into the left view: a convex quadrilateral when no corner crosses
+    the line at infinity; otherwise the footprint is warped pixel by pixel), the pixel itself
+    :data:`_INSIDE_MARGIN_PX` inside. Outside the footprint the warped image is the left image,
+    so a window reaching past the footprint's edge is judged on its pixels inside (the rest
+    agree exactly) instead of on a black border; the left image's own border needs nothing:
+    the window statistics reflect both images there alike.
     """
     flags = cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP
     warped = cv2.warpPerspective(right, homography, size, flags=flags,
                                  borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    kernel = np.ones((window + 2, window + 2), np.uint8)
-    valid = cv2.erode(_inside(right.shape, homography, size, 0.0), kernel,
-                      borderType=cv2.BORDER_CONSTANT, borderValue=255) == 255
+    footprint = _inside(right.shape, homography, size, 0.0)
+    cv2.copyTo(left, cv2.bitwise_not(footprint), warped)
+    valid = cv2.erode(footprint, _SQUARE_3, borderType=cv2.BORDER_CONSTANT,
+                      borderValue=255) == 255
     valid &= _inside(right.shape, homography, size, _INSIDE_MARGIN_PX) == 255
     return warped, valid
 
