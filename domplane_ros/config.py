@@ -163,6 +163,7 @@ class TrackingConfig(_Section):
     min_tracks: int = 20
     min_inlier_ratio: float = 0.5
     threshold_px: float = 2.0
+    reuse_pairs: int = 4
 
 
 @dataclass(frozen=True)

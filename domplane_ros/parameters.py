@@ -228,6 +228,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               0.0, 1.0),
     ParamSpec('tracking.threshold_px', 2.0, 'float',
               'Inlier threshold of the robust camera-motion fit, pixels.', 0.1, 50.0),
+    ParamSpec('tracking.reuse_pairs', 4, 'int',
+              "While locked, pairs in a row whose corners are the previous pair's corners "
+              'tracked into them (forward Lucas-Kanade, re-refined with cv2.cornerSubPix) '
+              'instead of detected afresh; then a pair detects again (also when under 70 % '
+              'of the corners survive). 0: detect every pair and fit the motion to '
+              'forward-backward checked tracks of the first tracking.max_points.', 0, 1000),
     # Optional head input.
     ParamSpec('head.joint_states_topic', '', 'str',
               'sensor_msgs/JointState topic of the head (e.g. head/joint_states); empty: no '

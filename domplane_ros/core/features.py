@@ -26,6 +26,7 @@ import numpy as np
 _MIN_RESPONSE = 1e-7
 # Three iterations are enough: the start is within a pixel of the corner (measured).
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 3, 0.1)
+_CARRIED_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 20, 0.01)
 
 
 class Features(NamedTuple):
@@ -221,7 +222,6 @@ def _refine_subpixel(gray: np.ndarray, response: np.ndarray, xs: np.ndarray, ys:
     cornerSubPix moves to the saddle point. Where cornerSubPix leaves its window (blurry,
     edge-like corners) the parabola vertex is kept.
     """
-    height, width = gray.shape
     lo_x, lo_y, hi_x, hi_y = box
     ry, rx = ys + offset[1], xs + offset[0]
     centre = response[ry, rx].astype(np.float64)
@@ -235,13 +235,63 @@ def _refine_subpixel(gray: np.ndarray, response: np.ndarray, xs: np.ndarray, ys:
     high = np.array([hi_x - 1, hi_y - 1], np.float64)
     peak = np.clip(np.stack([xs + lo_x + offsets[0], ys + lo_y + offsets[1]], axis=1), low,
                    high)
+    refined, good = _corner_subpix(gray, peak, block, low, high)
+    return np.where(good[:, None], refined, peak)
+
+
+def refine_corners(gray: np.ndarray, points: np.ndarray, config: FeatureConfig,
+                   roi: Sequence[float] | None = None, subpixel: bool = True
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Re-refine corners found by other means (tracked into this image) on the image's corners.
+
+    ``cv2.cornerSubPix`` with the detector's window, as :func:`detect_corners` ends; a point
+    whose refinement leaves its window (no corner there any more), or that lies outside the
+    region of interest and the detector's border, is dropped.
+
+    Args:
+        gray: (H, W) uint8 image.
+        points: (N, 2) float64 approximate corner positions, pixels.
+        config: Detector settings (``block_size`` and the default ``roi``).
+        roi: Optional region of interest as fractions; overrides ``config.roi``.
+
+    Returns:
+        ``(kept, refined)``: (K,) int64 indices of the kept points and their (K, 2) float64
+        refined positions, in the given order.
+
+    Raises:
+        ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
+
+    """
+    x0, y0, x1, y1 = gray_roi(gray, config.roi if roi is None else roi)
+    height, width = gray.shape
+    points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    block = int(config.block_size)
+    border = block // 2 + 2
+    low = np.array([max(x0, border), max(y0, border)], np.float64)
+    high = np.array([min(x1, width - border) - 1, min(y1, height - border) - 1], np.float64)
+    inside = np.flatnonzero(np.all((points >= low) & (points <= high), axis=1))
+    if inside.size == 0 or not subpixel:
+        return inside, points[inside]
+    refined, good = _corner_subpix(gray, points[inside], block, low, high, _CARRIED_CRITERIA)
+    return inside[good], refined[good]
+
+
+def _corner_subpix(gray: np.ndarray, start: np.ndarray, block: int, low: np.ndarray,
+                   high: np.ndarray, criteria: tuple = _SUBPIX_CRITERIA
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """Return cv2.cornerSubPix positions of (N, 2) ``start`` and (N,) bool: stayed in place.
+
+    A refinement is good if it is finite, within its window of the start and inside the
+    box ``low`` .. ``high``.
+    """
+    height, width = gray.shape
     # cornerSubPix needs the window plus a margin inside the image.
     half = min(max(2, block), (width - 6) // 2, (height - 6) // 2)
     if half < 1:
-        return peak
-    refined = cv2.cornerSubPix(gray, peak.astype(np.float32).reshape(-1, 1, 2), (half, half),
-                               (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
+        return start, np.zeros(start.shape[0], bool)
+    refined = cv2.cornerSubPix(gray, start.astype(np.float32).reshape(-1, 1, 2), (half, half),
+                               (-1, -1), criteria).reshape(-1, 2).astype(np.float64)
     good = (np.all(np.isfinite(refined), axis=1)
-            & np.all(np.abs(refined - peak) <= half, axis=1)
+            & np.all(np.abs(refined - start) <= half, axis=1)
             & np.all((refined >= low) & (refined <= high), axis=1))
-    return np.where(good[:, None], refined, peak)
+    return refined, good

@@ -28,6 +28,8 @@ import numpy as np
 if TYPE_CHECKING:
     from domplane_ros.config import TrackingConfig
 
+_LK_CRITERIA = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
+
 
 @dataclass(frozen=True)
 class CameraMotion:
@@ -79,6 +81,68 @@ def track_points(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
             (N, 2).
 
     """
+    points = _checked(previous, current, points)
+    if points.shape[0] == 0:
+        return np.empty((0, 2)), np.empty((0, 2))
+    window = (int(window_px), int(window_px))
+    p0 = points.astype(np.float32).reshape(-1, 1, 2)
+    p1, st1, _ = cv2.calcOpticalFlowPyrLK(previous, current, p0, None, winSize=window,
+                                          maxLevel=int(pyramid_levels), criteria=_LK_CRITERIA)
+    back, st2, _ = cv2.calcOpticalFlowPyrLK(current, previous, p1, None, winSize=window,
+                                            maxLevel=int(pyramid_levels), criteria=_LK_CRITERIA)
+    round_trip = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
+    target = p1.reshape(-1, 2).astype(np.float64)
+    keep = ((st1.ravel() == 1) & (st2.ravel() == 1) & (round_trip < forward_backward_px)
+            & _inside(target, current.shape))
+    return points[keep], target[keep]
+
+
+def track_forward(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
+                  window_px: int = 21, pyramid_levels: int = 3,
+                  initial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Track points from one grey image to the next, forward only (pyramidal Lucas-Kanade).
+
+    Half the cost of :func:`track_points`: no tracking back. For tracks that become the next
+    pair's corners (re-refined on the corner there, and judged by the robust motion fit and
+    the estimator), not for a motion fit of its own.
+
+    Args:
+        previous: (H, W) uint8 previous image.
+        current: (H, W) uint8 current image (same shape).
+        points: (N, 2) float64 points in ``previous``.
+        window_px: Side of the LK window, pixels (odd, >= 5).
+        pyramid_levels: Pyramid levels above full resolution.
+        initial: Optional (N, 2) float64 guesses of the positions in ``current`` (the
+            points tracked from an older image than ``previous``'s predecessor).
+
+    Returns:
+        ``(kept, target)``: (K,) int64 indices of the points LK tracked into the image and
+        their (K, 2) float64 positions in ``current``.
+
+    Raises:
+        ValueError: As :func:`track_points`.
+
+    """
+    points = _checked(previous, current, points)
+    if points.shape[0] == 0:
+        return np.empty(0, np.int64), np.empty((0, 2))
+    window = (int(window_px), int(window_px))
+    p0 = points.astype(np.float32).reshape(-1, 1, 2)
+    flags = 0
+    guess = None
+    if initial is not None:
+        guess = np.asarray(initial, np.float32).reshape(-1, 1, 2).copy()
+        flags = cv2.OPTFLOW_USE_INITIAL_FLOW
+    p1, status, _ = cv2.calcOpticalFlowPyrLK(previous, current, p0, guess, winSize=window,
+                                             maxLevel=int(pyramid_levels),
+                                             criteria=_LK_CRITERIA, flags=flags)
+    target = p1.reshape(-1, 2).astype(np.float64)
+    kept = np.flatnonzero((status.ravel() == 1) & _inside(target, current.shape))
+    return kept, target[kept]
+
+
+def _checked(previous: np.ndarray, current: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Validate two frames and a point set; return the points as (N, 2) float64."""
     for image, name in ((previous, 'previous'), (current, 'current')):
         if not (isinstance(image, np.ndarray) and image.ndim == 2
                 and image.dtype == np.uint8):
@@ -88,23 +152,14 @@ def track_points(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 2:
         raise ValueError(f'points must have shape (N, 2), got {points.shape}')
-    if points.shape[0] == 0:
-        return np.empty((0, 2)), np.empty((0, 2))
-    window = (int(window_px), int(window_px))
-    criteria = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 30, 0.01)
-    p0 = points.astype(np.float32).reshape(-1, 1, 2)
-    p1, st1, _ = cv2.calcOpticalFlowPyrLK(previous, current, p0, None, winSize=window,
-                                          maxLevel=int(pyramid_levels), criteria=criteria)
-    back, st2, _ = cv2.calcOpticalFlowPyrLK(current, previous, p1, None, winSize=window,
-                                            maxLevel=int(pyramid_levels), criteria=criteria)
-    round_trip = np.linalg.norm((back - p0).reshape(-1, 2), axis=1)
-    target = p1.reshape(-1, 2).astype(np.float64)
-    height, width = current.shape
-    keep = ((st1.ravel() == 1) & (st2.ravel() == 1) & (round_trip < forward_backward_px)
-            & np.all(np.isfinite(target), axis=1)
-            & (target[:, 0] >= 0) & (target[:, 0] <= width - 1)
-            & (target[:, 1] >= 0) & (target[:, 1] <= height - 1))
-    return points[keep], target[keep]
+    return points
+
+
+def _inside(points: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """Return (N,) bool: finite points inside an image of ``shape`` (H, W)."""
+    height, width = shape
+    return (np.all(np.isfinite(points), axis=1) & (points[:, 0] >= 0)
+            & (points[:, 0] <= width - 1) & (points[:, 1] >= 0) & (points[:, 1] <= height - 1))
 
 
 def fit_camera_motion(source: np.ndarray, target: np.ndarray, min_tracks: int = 20,

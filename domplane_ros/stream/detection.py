@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import cv2
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.core.features import detect_corners, Features
+from domplane_ros.core.features import detect_corners, Features, refine_corners
 from domplane_ros.core.lines import detect_lines
 from domplane_ros.core.pyramid import WorkingImage
 import numpy as np
@@ -25,7 +25,6 @@ def detect_features(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfi
     """
     kind = cfg.features.kind
     none_pts = np.zeros((0, 2))
-    none_seg = np.zeros((0, 4))
     if kind == 'lines':
         corners = (none_pts, none_pts)
         left_pts = right_pts = none_pts
@@ -34,12 +33,39 @@ def detect_features(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfi
                    detect_corners(right.image, cfg.features))
         left_pts, right_pts = (full_corners(image, points)
                                for image, points in zip((left, right), corners))
-    if kind == 'points':
-        left_seg = right_seg = none_seg
-    else:
-        left_seg = left.scale * detect_lines(left.image, cfg.features)
-        right_seg = right.scale * detect_lines(right.image, cfg.features)
+    left_seg, right_seg = _segments(left, right, cfg)
     return Features(left_pts, right_pts, left_seg, right_seg), corners
+
+
+def carried_features(left: WorkingImage, right: WorkingImage,
+                     tracked: tuple[np.ndarray, np.ndarray], cfg: PlaneNodeConfig
+                     ) -> tuple[Features, tuple[np.ndarray, np.ndarray],
+                                tuple[np.ndarray, np.ndarray]]:
+    """Return the features of a pair whose corners were tracked from an earlier pair.
+
+    The tracked positions (working pixels) outside the detector's region of interest and
+    border are dropped (:func:`~domplane_ros.core.features.refine_corners`, without sub-pixel
+    refinement: Lucas-Kanade from the image the corners were detected in is the more
+    accurate, measured); segments are detected as :func:`detect_features` does. Also returns
+    the working-level corners, which the tracker uses next, and the indices of the tracked
+    positions kept.
+    """
+    kept = tuple(refine_corners(image.image, points, cfg.features, subpixel=False)[0]
+                 for image, points in zip((left, right), tracked))
+    corners = (tracked[0][kept[0]], tracked[1][kept[1]])
+    left_pts, right_pts = (full_corners(image, points)
+                           for image, points in zip((left, right), corners))
+    left_seg, right_seg = _segments(left, right, cfg)
+    return Features(left_pts, right_pts, left_seg, right_seg), corners, (kept[0], kept[1])
+
+
+def _segments(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfig
+              ) -> tuple[np.ndarray, np.ndarray]:
+    """Return both images' segments (full pixels) as ``features.kind`` asks."""
+    if cfg.features.kind == 'points':
+        return np.zeros((0, 4)), np.zeros((0, 4))
+    return (left.scale * detect_lines(left.image, cfg.features),
+            right.scale * detect_lines(right.image, cfg.features))
 
 
 def full_corners(image: WorkingImage, corners: np.ndarray) -> np.ndarray:

@@ -20,13 +20,14 @@ from domplane_ros.core.homography import as_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.prior import prior_candidates, PriorSearch
-from domplane_ros.core.pyramid import level_homography, motion_to_full, WorkingImage
+from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
-from domplane_ros.core.tracking import camera_motion, predict_plane_homography
+from domplane_ros.core.tracking import predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
-from domplane_ros.stream.detection import detect_features, full_mask
+from domplane_ros.stream.detection import carried_features, detect_features, full_mask
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
+from domplane_ros.stream.motion import enough_carried, FrameTracker
 from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
 
@@ -68,16 +69,6 @@ class _Search:
     initial_tried: bool = False
 
 
-@dataclass
-class _Previous:
-    """The previous frame's working-level images and corners (working pixels), for tracking."""
-
-    left: np.ndarray
-    right: np.ndarray
-    left_points: np.ndarray
-    right_points: np.ndarray
-
-
 class PlanePipeline:
     """Dominant-plane estimation over a stream of stereo pairs.
 
@@ -109,7 +100,7 @@ class PlanePipeline:
         self._state = SEARCHING
         self._tracking_frames = 0
         self._search: _Search | None = None
-        self._previous: _Previous | None = None
+        self._tracker = FrameTracker()
         self._trust = TrustGate(self.config.verification)
 
     @property
@@ -145,7 +136,7 @@ class PlanePipeline:
         self._state = SEARCHING
         self._tracking_frames = 0
         self._search = None
-        self._previous = None
+        self._tracker.clear()
         self._trust.reset()
 
     def process(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
@@ -186,28 +177,24 @@ class PlanePipeline:
             return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
         work = (WorkingImage.of(left, cfg.features.max_width),
                 WorkingImage.of(right, cfg.features.max_width))
-        feats, track_pts = detect_features(*work, cfg)
-        t1 = time.perf_counter()
-        track_pts = self._tracking_points(*work, track_pts)
-        motions = self._camera_motions(*work)
-        t2 = time.perf_counter()
-        step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
+        feats, track_pts, motions, carried, spans = self._features(*work)
         t3 = time.perf_counter()
+        step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
+        t4 = time.perf_counter()
         estimate, h, mask, parallax = self._publish(step, *work, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
         if not step.accepted and reason.startswith(('too few left', 'too few right')):
             self.counts.add('too_few_features')
             reason += f' (left {texture_note(left)}; right {texture_note(right)})'
         if not step.keep_previous:
-            self._previous = _Previous(*(image.image.copy() if image.level == 0 else image.image
-                                         for image in work), *track_pts)
-        t4 = time.perf_counter()
+            self._tracker.keep(*work, track_pts, carried)
+        t5 = time.perf_counter()
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
                            parallax=parallax, estimate=estimate,
                            left_points=feats.left_points,
                            right_points=feats.right_points, reinitialised=step.reinitialised,
                            reason=reason, state=self._state,
-                           timings_ms=_timings_ms(t0, t1, t2, t3, t4),
+                           timings_ms=_timings_ms(t0, spans, t3, t4, t5),
                            warnings=check.warnings, left_lines=feats.left_lines,
                            right_lines=feats.right_lines, warm_start=step.warm_start,
                            prediction=step.prediction, candidates=step.candidates,
@@ -288,27 +275,33 @@ class PlanePipeline:
         return (detect_corners(left.image, self.config.features),
                 detect_corners(right.image, self.config.features))
 
-    # --- Temporal prediction ---------------------------------------------------------------
-    def _camera_motions(self, left: WorkingImage, right: WorkingImage
-                        ) -> tuple[np.ndarray, np.ndarray] | None:
-        """Return ``(M_left, M_right)`` (full pixels) from the previous frame, or None.
+    # --- Features and temporal prediction ------------------------------------------------
+    def _features(self, left: WorkingImage, right: WorkingImage
+                  ) -> tuple[Features, tuple[np.ndarray, np.ndarray],
+                             tuple[np.ndarray, np.ndarray] | None,
+                             tuple[np.ndarray, np.ndarray] | None, tuple[float, float]]:
+        """Return the pair's features, working-level corners, the cameras' motions (or None).
 
-        Tracked on the working level (:mod:`domplane_ros.core.pyramid`), scaled to full pixels.
+        Also, for corners carried from an earlier pair (:mod:`domplane_ros.stream.motion`),
+        which detected corner each is (None: detected in this pair), and the seconds spent on
+        features and on tracking.
         """
-        cfg = self.config.tracking
-        prev = self._previous
-        if not cfg.enabled or prev is None or prev.left.shape != left.image.shape:
-            return None
-        if self._state == SEARCHING and (self._search is None or self._search.best is None):
-            return None
-        motion_left = camera_motion(prev.left, left.image, prev.left_points, cfg)
-        if not motion_left.ok:
-            return None
-        motion_right = camera_motion(prev.right, right.image, prev.right_points, cfg)
-        if not motion_right.ok:
-            return None
-        return (motion_to_full(motion_left.homography, left.scale),
-                motion_to_full(motion_right.homography, right.scale))
+        searching = self._state == SEARCHING
+        t0 = time.perf_counter()
+        tracked = self._tracker.track(
+            left, right, self.config,
+            motion=not searching or (self._search is not None and self._search.best is not None),
+            carry=not searching)
+        t1 = time.perf_counter()
+        if tracked.corners is not None and tracked.alive is not None:
+            feats, corners, kept = carried_features(left, right, tracked.corners, self.config)
+            if enough_carried(corners, tracked.counts):
+                alive = (tracked.alive[0][kept[0]], tracked.alive[1][kept[1]])
+                return feats, corners, tracked.motions, alive, (time.perf_counter() - t1,
+                                                                t1 - t0)
+        feats, corners = detect_features(left, right, self.config)
+        corners = self._tracking_points(left, right, corners)
+        return feats, corners, tracked.motions, None, (time.perf_counter() - t1, t1 - t0)
 
     def _propagate(self, h: np.ndarray, motions: tuple[np.ndarray, np.ndarray] | None
                    ) -> np.ndarray | None:
@@ -571,10 +564,15 @@ class _Step:
     right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
 
 
-def _timings_ms(t0: float, t1: float, t2: float, t3: float, t4: float) -> dict[str, float]:
-    """Return the milliseconds of the features, tracking, estimate and mask, and the total."""
-    return {'features': 1e3 * (t1 - t0), 'tracking': 1e3 * (t2 - t1),
-            'estimate': 1e3 * (t3 - t2), 'mask': 1e3 * (t4 - t3), 'total': 1e3 * (t4 - t0)}
+def _timings_ms(t0: float, spans: tuple[float, float], t3: float, t4: float, t5: float
+                ) -> dict[str, float]:
+    """Return the milliseconds of the features, tracking, estimate and mask, and the total.
+
+    ``spans`` are the seconds of the features and the tracking (which interleave); the
+    estimate runs from ``t3`` to ``t4``, the mask from ``t4`` to ``t5``.
+    """
+    return {'features': 1e3 * spans[0], 'tracking': 1e3 * spans[1],
+            'estimate': 1e3 * (t4 - t3), 'mask': 1e3 * (t5 - t4), 'total': 1e3 * (t5 - t0)}
 
 
 def _check_frame(left: np.ndarray, right: np.ndarray, joint_speed: float | None) -> None:
