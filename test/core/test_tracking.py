@@ -151,3 +151,17 @@ def test_track_forward_validates_inputs():
         track_forward(img, img, np.zeros((3, 3)))
     kept, target = track_forward(img, img, np.empty((0, 2)))
     assert kept.shape == (0,) and target.shape == (0, 2)
+
+
+def test_forward_backward_zero_tracks_forward_only():
+    """forward_backward_px 0 keeps what forward LK keeps; a round-trip bound drops more."""
+    frame = random_scene(12, floor='random', n_boxes=2)
+    m = np.array([[1.0, -0.02, 6.0], [0.02, 1.0, 4.0], [0.0, 0.0, 1.0]])
+    warped = cv2.warpPerspective(frame.left, m, (W, H), flags=cv2.INTER_LINEAR)
+    warped[100:200, 100:300] = 255 - warped[100:200, 100:300]  # a changed region
+    corners = cv2.goodFeaturesToTrack(frame.left, 300, 0.01, 8).reshape(-1, 2).astype(float)
+    src, dst = track_points(frame.left, warped, corners, 11, 3, forward_backward_px=0.0)
+    kept, target = track_forward(frame.left, warped, corners, 11, 3)
+    assert np.array_equal(src, corners[kept]) and np.array_equal(dst, target)
+    checked, _ = track_points(frame.left, warped, corners, 11, 3, forward_backward_px=0.5)
+    assert 0 < checked.shape[0] < src.shape[0]
