@@ -159,11 +159,11 @@ class TrackingConfig(_Section):
     max_points: int = 150
     window_px: int = 11
     pyramid_levels: int = 3
-    forward_backward_px: float = 1.0
+    forward_backward_px: float = 0.0
     min_tracks: int = 20
     min_inlier_ratio: float = 0.5
     threshold_px: float = 2.0
-    reuse_pairs: int = 4
+    reuse_pairs: int = 0
 
 
 @dataclass(frozen=True)

@@ -220,9 +220,11 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               '(features.max_width).', 5, 101),
     ParamSpec('tracking.pyramid_levels', 3, 'int',
               'Pyramid levels of the Lucas-Kanade tracker above full resolution.', 0, 8),
-    ParamSpec('tracking.forward_backward_px', 1.0, 'float',
-              'Largest forward-backward round-trip error of a kept track, pixels.',
-              0.01, 50.0),
+    ParamSpec('tracking.forward_backward_px', 0.0, 'float',
+              'Largest forward-backward round-trip error of a kept track, pixels; 0: no '
+              'tracking back (half the tracker cost; the robust motion fit rejects bad tracks, '
+              'and the prediction is only the warm start: the same errors and locks in '
+              'evaluate_head, docs/speed.md).', 0.0, 50.0),
     ParamSpec('tracking.min_tracks', 20, 'int',
               'Fewer kept tracks than this in a camera: no prediction this frame.', 4, 10000),
     ParamSpec('tracking.min_inlier_ratio', 0.5, 'float',
@@ -230,12 +232,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               0.0, 1.0),
     ParamSpec('tracking.threshold_px', 2.0, 'float',
               'Inlier threshold of the robust camera-motion fit, pixels.', 0.1, 50.0),
-    ParamSpec('tracking.reuse_pairs', 4, 'int',
-              "While locked, pairs in a row whose corners are the previous pair's corners "
-              'tracked into them (forward Lucas-Kanade, re-refined with cv2.cornerSubPix) '
-              'instead of detected afresh; then a pair detects again (also when under 70 % '
-              'of the corners survive). 0: detect every pair and fit the motion to '
-              'forward-backward checked tracks of the first tracking.max_points.', 0, 1000),
+    ParamSpec('tracking.reuse_pairs', 0, 'int',
+              'Speed for accuracy: while locked, pairs in a row whose corners are the '
+              "previous pairs' corners tracked into them (forward Lucas-Kanade from the pair "
+              'they were detected in) instead of detected afresh; then a pair detects again '
+              '(also when under 70 % of the corners survive). Saves about a quarter of a '
+              'warm pair; costs accuracy on tiled and planked floors (docs/speed.md). '
+              '0: detect every pair, and fit the motion to tracks of the first '
+              'tracking.max_points.', 0, 1000),
     # Optional head input.
     ParamSpec('head.joint_states_topic', '', 'str',
               'sensor_msgs/JointState topic of the head (e.g. head/joint_states); empty: no '

@@ -11,6 +11,8 @@ shapes or types are programming errors and raise ``ValueError``.
 
 from __future__ import annotations
 
+import math
+
 from domplane_ros.core.result import FailedEstimate
 import numpy as np
 
@@ -170,6 +172,28 @@ def apply_homography(matrix: np.ndarray, points: np.ndarray) -> np.ndarray:
         out = np.stack([u / w, v / w], axis=1)
         return np.clip(out, -_FAR_PX, _FAR_PX)
     return np.stack([u / w, v / w], axis=1)
+
+
+def corner_distance_px(first: np.ndarray, second: np.ndarray, width: int, height: int) -> float:
+    """Return the largest distance between two homographies' images of the image corners.
+
+    Args:
+        first: (3, 3) float64 homography.
+        second: (3, 3) float64 homography.
+        width: Image width, pixels.
+        height: Image height, pixels.
+
+    Returns:
+        ``max_c ||first(c) - second(c)||`` over the four corners of a ``width`` x ``height``
+        image, pixels (inf if a corner maps to infinity).
+
+    """
+    corners = np.array([[0.0, 0.0], [width - 1.0, 0.0], [width - 1.0, height - 1.0],
+                        [0.0, height - 1.0]])
+    with np.errstate(divide='ignore', invalid='ignore'):
+        diff = apply_homography(first, corners) - apply_homography(second, corners)
+        distance = float(np.max(np.linalg.norm(diff, axis=1)))
+    return distance if math.isfinite(distance) else math.inf
 
 
 def transfer_error(matrix: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:

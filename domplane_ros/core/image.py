@@ -302,21 +302,21 @@ def gray_to_image_fields(array: np.ndarray, encoding: str = 'mono8') -> dict[str
     """Build the fields of a ``sensor_msgs/Image`` from a one-channel image.
 
     Args:
-        array: ``(H, W) uint8`` for mono8 or 8UC1, ``(H, W) uint16`` for mono16. H and W must
-            be positive.
-        encoding: ``'mono8'``, ``'8UC1'`` or ``'mono16'``.
+        array: ``(H, W) uint8`` for mono8 or 8UC1, ``(H, W) uint16`` for mono16, ``(H, W)
+            float32`` for 32FC1 (finite). H and W must be positive.
+        encoding: ``'mono8'``, ``'8UC1'``, ``'mono16'`` or ``'32FC1'``.
 
     Returns:
         A dict with the keys ``height``, ``width``, ``encoding``, ``is_bigendian``, ``step``
-        and ``data`` (``bytes``, unpadded rows; mono16 is written little-endian with
+        and ``data`` (``bytes``, unpadded rows; mono16 and 32FC1 are written little-endian with
         ``is_bigendian = 0``).
 
     Raises:
-        ValueError: If the encoding is not one of the above, or the array's shape or dtype
-            does not fit it.
+        ValueError: If the encoding is not one of the above, the array's shape or dtype does
+            not fit it, or a 32FC1 image holds a non-finite value.
 
     """
-    dtypes = {'mono8': np.uint8, '8UC1': np.uint8, 'mono16': np.uint16}
+    dtypes = {'mono8': np.uint8, '8UC1': np.uint8, 'mono16': np.uint16, '32FC1': np.float32}
     if encoding not in dtypes:
         raise ValueError(
             f'encoding must be one of {", ".join(dtypes)} for a gray image, got {encoding!r}')
@@ -326,6 +326,8 @@ def gray_to_image_fields(array: np.ndarray, encoding: str = 'mono8') -> dict[str
     if array.dtype.newbyteorder('=') != np.dtype(dtypes[encoding]):
         raise ValueError(
             f'{encoding} image must have dtype {np.dtype(dtypes[encoding])}, got {array.dtype}')
+    if encoding == '32FC1' and not np.all(np.isfinite(array)):
+        raise ValueError('32FC1 image holds non-finite values')
     height, width = array.shape
     little_endian = array.astype(array.dtype.newbyteorder('<'), copy=False)
     return {

@@ -62,7 +62,9 @@ def track_points(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
     """Track points from one grey image to the next (pyramidal Lucas-Kanade).
 
     A point is kept only if LK converged both ways and tracking it back from its new position
-    lands within ``forward_backward_px`` of where it started.
+    lands within ``forward_backward_px`` of where it started; with ``forward_backward_px`` 0
+    there is no tracking back (:func:`track_forward`, half the cost): every point LK tracked
+    into the image is kept, and the robust motion fit rejects the bad tracks.
 
     Args:
         previous: (H, W) uint8 previous image.
@@ -70,7 +72,8 @@ def track_points(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
         points: (N, 2) float64 points in ``previous``.
         window_px: Side of the LK window, pixels (odd, >= 5).
         pyramid_levels: Pyramid levels above full resolution.
-        forward_backward_px: Largest forward-backward round-trip error, pixels.
+        forward_backward_px: Largest forward-backward round-trip error, pixels; 0: forward
+            only.
 
     Returns:
         ``(source, target)``: (K, 2) float64 kept points in ``previous`` and their (K, 2)
@@ -84,6 +87,9 @@ def track_points(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
     points = _checked(previous, current, points)
     if points.shape[0] == 0:
         return np.empty((0, 2)), np.empty((0, 2))
+    if forward_backward_px <= 0:
+        kept, target = track_forward(previous, current, points, window_px, pyramid_levels)
+        return points[kept], target
     window = (int(window_px), int(window_px))
     p0 = points.astype(np.float32).reshape(-1, 1, 2)
     p1, st1, _ = cv2.calcOpticalFlowPyrLK(previous, current, p0, None, winSize=window,

@@ -10,7 +10,7 @@ same resets), and writes a new bag with the node's outputs::
     plane_replay INPUT_BAG OUTPUT_BAG [--params-file config/plane_node.yaml]
                  [--left-topic /left/image_raw] [--right-topic /right/image_raw]
                  [--storage sqlite3|mcap] [--force] [--csv FILE] [--no-progress]
-                 [--strict] [--keep-partial] [--debug-images]
+                 [--strict] [--keep-partial] [--debug-images] [--parallax]
 
 Output topics, each written with the bag timestamp of the left image's header stamp:
 
@@ -25,6 +25,10 @@ Output topics, each written with the bag timestamp of the left image's header st
   ``--debug-images``: the node's ``plane/debug_image`` for every processed pair (mask tint,
   corners matched on the plane in cyan, unmatched ones in magenta), to review a recording frame
   by frame in Foxglove or rqt_image_view.
+* ``/plane/parallax`` (``sensor_msgs/msg/Image``, 32FC1, the left image's header), only with
+  ``--parallax``: the node's ``plane/parallax`` for every processed pair (the residual parallax
+  after the plane warp in pixels, -1 where not measured, everywhere without a plane), to look up
+  what a region's parallax was when setting ``mask.parallax_threshold_px`` for a rig.
 
 Exit codes: 0 on success; 3 when the output is complete except for messages the bag could
 not give (undecodable payloads: skipped, counted, named on stderr and recorded in the output's
@@ -103,7 +107,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
                progress: bool = False,
                on_frame: Callable[[ReplayedFrame], None] | None = None,
                strict: bool = False, keep_partial: bool = False,
-               debug_images: bool = False) -> ReplaySummary:
+               debug_images: bool = False, parallax: bool = False) -> ReplaySummary:
     """Replay a bag through the pipeline and write the node's outputs to a new bag.
 
     Everything that can be checked up front is checked before anything is written.
@@ -125,6 +129,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
             ``OUTPUT_BAG.incomplete`` (and ``CSV.incomplete``), marked
             ``plane_replay.complete: 'false'`` in its metadata, instead of removing it.
         debug_images: Also write ``/plane/debug_image`` (the node's debug overlay, rgb8).
+        parallax: Also write ``/plane/parallax`` (the node's residual parallax, 32FC1).
 
     Returns:
         The summary.
@@ -144,7 +149,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     with BagInput(paths.input_bag, left_topic, right_topic) as bag:
         run = _Run(bag, paths, config if config is not None else PlaneNodeConfig(),
                    (left_topic, right_topic), storage or bag.storage, force, progress,
-                   debug_images)
+                   debug_images, parallax)
         try:
             run.execute(on_frame, strict, keep_partial)
         except NoPairsError as err:
@@ -191,14 +196,14 @@ class _Run:
 
     def __init__(self, bag: BagInput, paths: _RunPaths, config: PlaneNodeConfig,
                  topics: tuple[str, str], storage: str, force: bool, progress: bool,
-                 debug_images: bool = False) -> None:
+                 debug_images: bool = False, parallax: bool = False) -> None:
         self.bag = bag
         self.paths = paths
         self.summary = ReplaySummary(str(paths.input_bag), str(paths.output_bag), storage)
         self.session = ReplaySession(config, topics)
         self.clock = DiagnosticsClock(config.transport.diagnostics_period_s)
         self.output = BagOutput(paths.output_bag, storage, replace=force,
-                                debug_images=debug_images)
+                                debug_images=debug_images, parallax=parallax)
         self.table = CsvOutput(paths.csv) if paths.csv is not None else None
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
@@ -427,6 +432,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--debug-images', action='store_true',
                         help='also write /plane/debug_image (rgb8: mask tint, matched and '
                              'unmatched corners) for every pair, to review in Foxglove')
+    parser.add_argument('--parallax', action='store_true',
+                        help='also write /plane/parallax (32FC1: residual parallax after the '
+                             'plane warp in pixels, -1 where not measured) for every pair')
     bar = parser.add_mutually_exclusive_group()
     bar.add_argument('--no-progress', dest='progress', action='store_false', default=None,
                      help='no progress bar (the default when stderr is not a terminal)')
@@ -473,7 +481,7 @@ def main(argv: list[str] | None = None) -> int:
                              storage=args.storage, force=args.force, csv_path=args.csv,
                              progress=progress, strict=args.strict,
                              keep_partial=args.keep_partial,
-                             debug_images=args.debug_images)
+                             debug_images=args.debug_images, parallax=args.parallax)
     except Terminated:
         _error('terminated (SIGTERM); the partial output was removed')
         return EXIT_TERMINATED

@@ -1,7 +1,8 @@
 """Writing plane_node's outputs into a bag that appears only when it is complete.
 
 :class:`BagOutput` writes ``/plane/homography``, ``/plane/mask``, ``/plane/result`` and
-``/diagnostics`` (rosbags message types) into a hidden temporary folder next to the output
+``/diagnostics`` (rosbags message types; on request ``/plane/debug_image`` and
+``/plane/parallax``) into a hidden temporary folder next to the output
 and renames it into place at :meth:`BagOutput.commit`; :func:`keep_partial` commits what a
 failed run wrote as ``OUTPUT_BAG.incomplete`` instead. :class:`DiagnosticsClock` says when a
 diagnostics message is due, in bag time.
@@ -21,7 +22,7 @@ from typing import Any, Iterator
 from domplane_ros.core.image import gray_to_image_fields, rgb_to_image_fields
 from domplane_ros.errors import BagError, clip_text
 from domplane_ros.replay.reader import BagReadError, IMAGE_TYPE, ReplayedFrame, typestore
-from domplane_ros.stream.frame import debug_overlay
+from domplane_ros.stream.frame import debug_overlay, parallax_image
 from domplane_ros.stream.status import result_status, RESULT_STATUS_NAME, STATUS_NAME
 import numpy as np
 from rosbags.rosbag2 import StoragePlugin, Writer
@@ -33,6 +34,7 @@ HOMOGRAPHY_TOPIC = '/plane/homography'
 MASK_TOPIC = '/plane/mask'
 RESULT_TOPIC = '/plane/result'
 DEBUG_IMAGE_TOPIC = '/plane/debug_image'
+PARALLAX_TOPIC = '/plane/parallax'
 DIAGNOSTICS_TOPIC = '/diagnostics'
 
 STORAGES = {'sqlite3': StoragePlugin.SQLITE3, 'mcap': StoragePlugin.MCAP}
@@ -69,11 +71,13 @@ class BagOutput:
         replace: Replace an existing ``path`` at commit.
         debug_images: Also write ``/plane/debug_image`` (rgb8, the node's debug overlay) for
             every processed pair.
+        parallax: Also write ``/plane/parallax`` (32FC1, the node's residual parallax image)
+            for every processed pair.
 
     """
 
     def __init__(self, path: str | os.PathLike[str], storage: str, replace: bool,
-                 debug_images: bool = False) -> None:
+                 debug_images: bool = False, parallax: bool = False) -> None:
         """Create the temporary bag and its connections."""
         self.path = Path(path)
         self.replace = replace
@@ -95,11 +99,15 @@ class BagOutput:
                                                             typestore=ts)
             self._conn_diag = self._writer.add_connection(DIAGNOSTICS_TOPIC, DIAGNOSTICS_TYPE,
                                                           typestore=ts)
-            self._conn_debug = None
+            self._conn_debug = self._conn_parallax = None
             if debug_images:
                 self._conn_debug = self._writer.add_connection(DEBUG_IMAGE_TOPIC, IMAGE_TYPE,
                                                                typestore=ts)
                 self.counts[DEBUG_IMAGE_TOPIC] = 0
+            if parallax:
+                self._conn_parallax = self._writer.add_connection(PARALLAX_TOPIC, IMAGE_TYPE,
+                                                                  typestore=ts)
+                self.counts[PARALLAX_TOPIC] = 0
         except BaseException:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             raise
@@ -130,10 +138,11 @@ class BagOutput:
         self.counts[topic] += 1
 
     def write_frame(self, frame: ReplayedFrame) -> None:
-        """Write a processed pair: homography (with a plane), result, mask and debug image.
+        """Write a processed pair: homography (with a plane), result, mask, debug image, parallax.
 
-        All are written at the left image's header stamp; the result, the mask and the debug
-        image (only with ``debug_images``) carry the left header, as the node publishes them.
+        All are written at the left image's header stamp; the result, the mask, the debug
+        image (only with ``debug_images``) and the parallax (only with ``parallax``) carry the
+        left header, as the node publishes them.
         """
         header = frame.pair.left.header
         stamp = frame.pair.left_stamp_ns
@@ -157,15 +166,19 @@ class BagOutput:
                 hardware_id=_DIAGNOSTICS_HARDWARE_ID,
                 values=[self._KeyValue(key=k, value=v) for k, v in values])]))
         if self._conn_debug is not None:
-            self._write_debug_image(frame, mask.header)
+            fields = rgb_to_image_fields(debug_overlay(frame.left, frame.result), 'rgb8')
+            self._write(self._conn_debug, DEBUG_IMAGE_TOPIC, stamp,
+                        self._image(fields, mask.header))
+        if self._conn_parallax is not None:
+            fields = gray_to_image_fields(parallax_image(frame.result), '32FC1')
+            self._write(self._conn_parallax, PARALLAX_TOPIC, stamp,
+                        self._image(fields, mask.header))
 
-    def _write_debug_image(self, frame: ReplayedFrame, header: Any) -> None:
-        """Write the node's debug overlay of a pair (rgb8) with the given header."""
-        fields = rgb_to_image_fields(debug_overlay(frame.left, frame.result), 'rgb8')
-        image = self._Image(header=header, height=fields['height'], width=fields['width'],
-                            encoding=fields['encoding'], is_bigendian=fields['is_bigendian'],
-                            step=fields['step'], data=np.frombuffer(fields['data'], np.uint8))
-        self._write(self._conn_debug, DEBUG_IMAGE_TOPIC, frame.pair.left_stamp_ns, image)
+    def _image(self, fields: dict[str, Any], header: Any) -> Any:
+        """Return a rosbags sensor_msgs/Image of image fields with the given header."""
+        return self._Image(header=header, height=fields['height'], width=fields['width'],
+                           encoding=fields['encoding'], is_bigendian=fields['is_bigendian'],
+                           step=fields['step'], data=np.frombuffer(fields['data'], np.uint8))
 
     def homography_msg(self, homography: np.ndarray) -> Any:
         """Return the node's Float64MultiArray for a (3, 3) homography (rosbags message)."""

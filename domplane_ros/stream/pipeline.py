@@ -24,6 +24,7 @@ from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
+from domplane_ros.stream.challenge import Challenge, COARSE, PRIOR_START, PRIOR_STARTS, SCREEN
 from domplane_ros.stream.detection import carried_features, detect_features, full_mask
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
@@ -42,9 +43,6 @@ SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidate
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
 _WIDE_BASIN_FACTOR = 4.0
-# Prior candidates (best screening energy first) refined as challengers beside the coarse
-# alignment's planes: the coarse flow misses floors that the prior's screening finds.
-CHALLENGE_PRIOR_CANDIDATES = 2
 
 
 @dataclass
@@ -58,6 +56,7 @@ class PipelineStats:
     resets: int = 0
     predictions: int = 0
     candidates: int = 0
+    carried: int = 0  # pairs whose corners were carried from an earlier pair, not detected
 
 
 @dataclass
@@ -101,6 +100,7 @@ class PlanePipeline:
         self._tracking_frames = 0
         self._search: _Search | None = None
         self._tracker = FrameTracker()
+        self._challenge: Challenge | None = None
         self._trust = TrustGate(self.config.verification)
 
     @property
@@ -136,6 +136,7 @@ class PlanePipeline:
         self._state = SEARCHING
         self._tracking_frames = 0
         self._search = None
+        self._challenge = None
         self._tracker.clear()
         self._trust.reset()
 
@@ -178,6 +179,7 @@ class PlanePipeline:
         work = (WorkingImage.of(left, cfg.features.max_width),
                 WorkingImage.of(right, cfg.features.max_width))
         feats, track_pts, motions, carried, spans = self._features(*work)
+        self.stats.carried += carried is not None
         t3 = time.perf_counter()
         step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
         t4 = time.perf_counter()
@@ -346,7 +348,7 @@ class PlanePipeline:
                 return
             if not reason:
                 self._verified(step, estimate, verdict)
-                self._challenge(step, verdict, problem, feats, size)
+                self._challenge_step(step, verdict, problem, feats, size, motions)
                 return
         step.reason = reason
         self._lose_frame(step, prediction)
@@ -376,22 +378,49 @@ class PlanePipeline:
         self._search = None
         self._tracking_frames = 0
 
-    def _challenge(self, step: _Step, lock: Verdict, problem: TwoStep | FailedEstimate,
-                   feats: Features, size: tuple[int, int]) -> None:
-        """Every few locked pairs, let the coarse alignment's best plane challenge the lock.
+    def _challenge_step(self, step: _Step, lock: Verdict, problem: TwoStep | FailedEstimate,
+                        feats: Features, size: tuple[int, int],
+                        motions: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Every few locked pairs, let other planes challenge the lock, one task per pair.
 
-        The lock was verified in this pair already (``lock``); only the challengers are.
+        See :mod:`domplane_ros.stream.challenge`. The lock was verified in this pair already
+        (``lock``); only the challengers are.
         """
-        if not self._trust.challenge_due() or isinstance(problem, FailedEstimate):
+        if isinstance(problem, FailedEstimate) or step.estimate is None:
             return
-        pool = self._coarse_estimates(step, problem, feats, size)
-        pool += self._prior_estimates(problem, feats, size, CHALLENGE_PRIOR_CANDIDATES)
-        best, verdict, _ = self._trust.pick(step.left, step.right, pool,
-                                            self.config.features.roi)
-        if best is not None and verdict is not None and self._trust.beats(verdict, lock):
-            step.warm_start = 'challenger'
-            self._trust.reset()
-            self._verified(step, best, verdict)
+        if self._challenge is None:
+            if not self._trust.challenge_due():
+                return
+            self._challenge = Challenge()
+        else:
+            self._challenge.follow(motions)
+        task = self._challenge.next_task()
+        if task is None:
+            self._challenge = None
+            return
+        if task.kind == COARSE:
+            self._challenge.add_coarse_starts(
+                self._trust.coarse_candidates(step.left, step.right),
+                step.estimate.homography, size)
+        elif task.kind == SCREEN:
+            search = PriorSearch(problem, self._candidates(size),
+                                 self.config.prior.screen_threshold_px)
+            self._challenge.add_prior_starts(search.candidates[i] for i in
+                                             search.ranked()[:PRIOR_STARTS])
+        else:
+            result = problem.estimate(task.start, self.config.estimator)
+            if result.ok and not self._checks.rejection_reason(
+                    result, feats, size, bounds=task.kind == PRIOR_START):
+                best, verdict, _ = self._trust.pick(step.left, step.right, [result],
+                                                    self.config.features.roi)
+                if best is not None and verdict is not None and self._trust.beats(verdict, lock):
+                    step.warm_start = 'challenger'
+                    self._trust.reset()
+                    self._verified(step, best, verdict)
+                    self._challenge = None
+                    return
+        if self._challenge.done:
+            self._challenge = None
 
     def _coarse_estimates(self, step: _Step, problem: TwoStep, feats: Features,
                           size: tuple[int, int]) -> list[PlaneEstimate]:
@@ -402,13 +431,6 @@ class PlanePipeline:
             if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)
         return out
-
-    def _prior_estimates(self, problem: TwoStep, feats: Features, size: tuple[int, int],
-                         count: int) -> list[PlaneEstimate]:
-        """Return the refined, unrejected planes of the ``count`` best-screened candidates."""
-        prior_search = PriorSearch(problem, self._candidates(size),
-                                   self.config.prior.screen_threshold_px)
-        return self._refined(prior_search, prior_search.ranked()[:count], feats, size)[0]
 
     def _refined(self, prior_search: PriorSearch, indices: list[int], feats: Features,
                  size: tuple[int, int]) -> tuple[list[PlaneEstimate], str]:
@@ -469,6 +491,7 @@ class PlanePipeline:
         self._last_h = None
         self._last_energy_per_point = None
         self._search = None
+        self._challenge = None
 
     def _search_step(self, step: _Step, feats: Features, problem: TwoStep | FailedEstimate,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None

@@ -1,15 +1,18 @@
 """Measure the ground/obstacle mask: residual parallax (now) against local NCC (before), one run.
 
 Run ``python -m domplane_ros.tools.evaluate_mask [--scenes N] [--held-out] [--indoor N]
-[--data DIR] [--out DIR] [--repeats R]``. Both masks run in the same process on the same
-images:
+[--data DIR] [--out DIR] [--repeats R] [--baseline FILE]``. The masks run in the same process
+on the same images:
 
 * ``parallax``: :func:`~domplane_ros.core.mask.parallax_mask` with the documented defaults
   (``MaskConfig()``) and the prior's focal range (the default prior's on rendered scenes, the
   KITTI prior's on KITTI);
 * ``ncc``: the mask before issue 12 (:mod:`domplane_ros.tools.evaluation.ncc_mask`);
 * ``parallax, min height 0.05``: the parallax mask with ``mask.min_obstacle_height`` 0.05
-  instead of 0.1 (more pixels unknown, thinner bottoms of walls and furniture marked plane).
+  instead of 0.1 (more pixels unknown, thinner bottoms of walls and furniture marked plane);
+* with ``--baseline FILE``, ``baseline``: the ``parallax_mask`` of another version of
+  ``core/mask.py`` (``git show COMMIT:domplane_ros/core/mask.py > FILE``), with the defaults,
+  to compare a change before and after in one run.
 
 Data, each scored with the plane homography named in the table:
 
@@ -31,7 +34,8 @@ Data, each scored with the plane homography named in the table:
 
 With ``--readme-overlay FILE`` it also writes the README picture (right image, left image
 with the pipeline's debug overlay on a rendered scene). Writes ``mask_contact_sheet.png``
-(left image; NCC mask; parallax mask; residual parallax, 0-8 px, black where not measured)
+(left image; NCC mask, or the baseline's with ``--baseline``; parallax mask; residual
+parallax, 0-8 px, black where not measured)
 and ``mask_summary.txt`` (the tables) to ``--out``. CPU time is given beside wall-clock time
 because the machine may be shared: it counts only this process's work.
 """
@@ -39,6 +43,7 @@ because the machine may be shared: it counts only this process's work.
 from __future__ import annotations
 
 from dataclasses import dataclass
+import importlib.util
 import math
 from pathlib import Path
 import sys
@@ -76,15 +81,43 @@ TARGETS = {'plane_iou': 0.92, 'obstacle_recall': 0.92, 'ground_as_obstacle': 0.0
            'road_plane': 0.95, 'off_road_not_plane': 0.95, 'off_road_plane': 0.02,
            'indoor_plane': 0.02, 'time_ms': 3.0}
 MaskFunction = Callable[[np.ndarray, np.ndarray, np.ndarray], ParallaxMask]
+# Column titles of the mask functions.
+TITLES = {'ncc': 'ncc (before)', 'baseline': 'baseline (--baseline)',
+          'parallax': 'parallax (now)', 'parallax_low': f'parallax, min height {LOW_MIN_HEIGHT}'}
 
 
-def masks(focal_px: tuple[float, float] = DEFAULT_FOCAL_PX) -> dict[str, MaskFunction]:
-    """Return both mask functions as ``(left, right, H) -> ParallaxMask``."""
+def load_baseline(path: Path) -> Callable[..., ParallaxMask]:
+    """Return ``parallax_mask`` of a ``core/mask.py`` file (another version of the module).
+
+    Raises:
+        ValueError: If the file cannot be loaded or has no ``parallax_mask``.
+
+    """
+    spec = importlib.util.spec_from_file_location('baseline_mask', path)
+    if spec is None or spec.loader is None:
+        raise ValueError(f'cannot load {path} as a Python module')
+    module = importlib.util.module_from_spec(spec)
+    try:
+        spec.loader.exec_module(module)
+    except (OSError, SyntaxError, ImportError) as err:
+        raise ValueError(f'cannot load {path}: {err}') from err
+    if not callable(getattr(module, 'parallax_mask', None)):
+        raise ValueError(f'{path} has no parallax_mask function')
+    return module.parallax_mask
+
+
+def masks(focal_px: tuple[float, float] = DEFAULT_FOCAL_PX,
+          baseline: Callable[..., ParallaxMask] | None = None) -> dict[str, MaskFunction]:
+    """Return the mask functions as ``(left, right, H) -> ParallaxMask`` (see :data:`TITLES`)."""
     config = MaskConfig()
     low = MaskConfig(min_obstacle_height=LOW_MIN_HEIGHT)
 
     def old(left: np.ndarray, right: np.ndarray, hom: np.ndarray) -> ParallaxMask:
         return ParallaxMask(ncc_mask(left, right, hom), np.zeros((1, 1), np.float32))
+
+    def before(left: np.ndarray, right: np.ndarray, hom: np.ndarray) -> ParallaxMask:
+        assert baseline is not None
+        return baseline(left, right, hom, config, focal_px)
 
     def new(left: np.ndarray, right: np.ndarray, hom: np.ndarray) -> ParallaxMask:
         return parallax_mask(left, right, hom, config, focal_px)
@@ -92,7 +125,10 @@ def masks(focal_px: tuple[float, float] = DEFAULT_FOCAL_PX) -> dict[str, MaskFun
     def new_low(left: np.ndarray, right: np.ndarray, hom: np.ndarray) -> ParallaxMask:
         return parallax_mask(left, right, hom, low, focal_px)
 
-    return {'ncc': old, 'parallax': new, 'parallax_low': new_low}
+    functions = {'ncc': old, 'baseline': before, 'parallax': new, 'parallax_low': new_low}
+    if baseline is None:
+        del functions['baseline']
+    return functions
 
 
 def rendered_scores(frame: StereoFrame, labels: np.ndarray) -> dict[str, float]:
@@ -143,9 +179,11 @@ def kitti_scores(labels: np.ndarray, truth: KittiLabels) -> dict[str, float]:
             'off_road_obstacle': float(np.mean(labels[truth.off_road] == OBSTACLE))}
 
 
-def time_masks(frames: Sequence[StereoFrame], repeats: int) -> dict[str, dict[str, float]]:
+def time_masks(frames: Sequence[StereoFrame], repeats: int,
+               baseline: Callable[..., ParallaxMask] | None = None
+               ) -> dict[str, dict[str, float]]:
     """Return each mask's median wall-clock and CPU time in ms (interleaved, one core)."""
-    functions = masks()
+    functions = masks(baseline=baseline)
     times: dict[str, dict[str, list[float]]] = {
         name: {'wall': [], 'cpu': []} for name in functions}
     with one_core():
@@ -202,27 +240,31 @@ def contact_sheet(rows: list[tuple[str, list[np.ndarray]]], tile_width: int = 32
                       for line in lines])
 
 
-def evaluate_rendered(seeds: Sequence[int], sheet: list, shown: int = 4
+def evaluate_rendered(seeds: Sequence[int], sheet: list, shown: int = 4,
+                      baseline: Callable[..., ParallaxMask] | None = None
                       ) -> dict[str, list[dict[str, float]]]:
-    """Score both masks on rendered scenes; the first ``shown`` go on the contact sheet."""
+    """Score the masks on rendered scenes; the first ``shown`` go on the contact sheet."""
     return _evaluate_frames(seeds, sheet, shown, 'rendered', random_scene, rendered_scores,
-                            lambda seed, frame: f'rendered seed {seed} ({frame.floor})')
+                            lambda seed, frame: f'rendered seed {seed} ({frame.floor})',
+                            baseline)
 
 
-def evaluate_indoor(seeds: Sequence[int], sheet: list, shown: int = 2
+def evaluate_indoor(seeds: Sequence[int], sheet: list, shown: int = 2,
+                    baseline: Callable[..., ParallaxMask] | None = None
                     ) -> dict[str, list[dict[str, float]]]:
-    """Score both masks on the small-baseline indoor head."""
+    """Score the masks on the small-baseline indoor head."""
     return _evaluate_frames(seeds, sheet, shown, 'indoor', indoor_scene, indoor_scores,
-                            lambda seed, frame: f'indoor seed {seed} (b/h 0.075)')
+                            lambda seed, frame: f'indoor seed {seed} (b/h 0.075)', baseline)
 
 
 def _evaluate_frames(seeds: Sequence[int], sheet: list, shown: int, name: str,
                      render: Callable[[int], StereoFrame],
                      score: Callable[[StereoFrame, np.ndarray], dict],
-                     label: Callable[[int, StereoFrame], str]
+                     label: Callable[[int, StereoFrame], str],
+                     baseline: Callable[..., ParallaxMask] | None = None
                      ) -> dict[str, list[dict[str, float]]]:
-    """Score both masks on ``render(seed)`` frames; the first ``shown`` go on the sheet."""
-    functions = masks()
+    """Score the masks on ``render(seed)`` frames; the first ``shown`` go on the sheet."""
+    functions = masks(baseline=baseline)
     rows: dict[str, list[dict[str, float]]] = {mask: [] for mask in functions}
     for index, seed in enumerate(progress(seeds, name)):
         frame = render(seed)
@@ -231,19 +273,26 @@ def _evaluate_frames(seeds: Sequence[int], sheet: list, shown: int, name: str,
         for mask, result in results.items():
             rows[mask].append(score(frame, result.labels))
         if index < shown:
-            sheet.append((label(seed, frame),
-                          _tile(frame.left, results['parallax'], results['ncc'].labels)))
+            sheet.append((label(seed, frame), _tile(frame.left, results['parallax'],
+                                                    _before(results).labels)))
     return rows
 
 
-def evaluate_kitti(folder: Path, sheet: list) -> dict[str, dict[str, dict[str, float]]]:
-    """Score both masks on KITTI with the reference and with our estimated homography."""
+def _before(results: dict[str, ParallaxMask]) -> ParallaxMask:
+    """Return the mask the contact sheet shows as *before*: the baseline's, else the NCC's."""
+    return results.get('baseline', results['ncc'])
+
+
+def evaluate_kitti(folder: Path, sheet: list,
+                   baseline: Callable[..., ParallaxMask] | None = None
+                   ) -> dict[str, dict[str, dict[str, float]]]:
+    """Score the masks on KITTI with the reference and with our estimated homography."""
     left = read_gray(folder / 'left.png')
     right = read_gray(folder / 'right.png')
     truth = kitti_labels(folder)
     config = PlaneNodeConfig(features=FeatureConfig(roi=KITTI_ROI), prior=KITTI_PRIOR)
     estimated = run_ours(left, right, config, repeats=1).homography
-    functions = masks(KITTI_PRIOR.focal_px)
+    functions = masks(KITTI_PRIOR.focal_px, baseline)
     out: dict[str, dict[str, dict[str, float]]] = {}
     for h_name, hom in (('reference H', truth.reference_h), ('our H', estimated)):
         if hom is None:
@@ -252,7 +301,7 @@ def evaluate_kitti(folder: Path, sheet: list) -> dict[str, dict[str, dict[str, f
         results = {name: f(left, right, hom) for name, f in functions.items()}
         out[h_name] = {name: kitti_scores(r.labels, truth) for name, r in results.items()}
         sheet.append((f'KITTI 000046, {h_name}',
-                      _tile(left, results['parallax'], results['ncc'].labels)))
+                      _tile(left, results['parallax'], _before(results).labels)))
     return out
 
 
@@ -260,8 +309,7 @@ def summary(rendered: dict, indoor: dict, kitti: dict, times: dict[str, float],
             held_out: bool) -> str:
     """Return the tables of the run as text."""
     seeds = 'held-out' if held_out else 'tuning'
-    header = ['data', 'figure', 'target', 'ncc (before)', 'parallax (now)',
-              f'parallax, min height {LOW_MIN_HEIGHT}']
+    header = ['data', 'figure', 'target'] + [TITLES[name] for name in rendered]
     rows = []
     for key, label in (('plane_iou', 'plane IoU (median)'),
                        ('obstacle_recall', 'obstacle recall (median)'),
@@ -326,17 +374,27 @@ def main(argv: Sequence[str] | None = None) -> int:
     add_output_argument(parser, 'mask_output', 'the contact sheet and the summary')
     parser.add_argument('--readme-overlay', type=Path, default=None,
                         help='also write the README picture (docs/overlay.png) to this file')
+    parser.add_argument('--baseline', type=Path, default=None, metavar='FILE',
+                        help='another version of core/mask.py (git show '
+                             'COMMIT:domplane_ros/core/mask.py > FILE) as an extra column')
     args = parser.parse_args(argv)
+    baseline = None
+    if args.baseline is not None:
+        try:
+            baseline = load_baseline(args.baseline)
+        except ValueError as err:
+            parser.error(str(err))
     if args.readme_overlay is not None:
         readme_overlay(args.readme_overlay)
     first = HELD_OUT_FIRST_SEED if args.held_out else 0
     indoor_first = INDOOR_HELD_OUT_FIRST_SEED if args.held_out else INDOOR_FIRST_SEED
     sheet: list = []
-    rendered = evaluate_rendered(range(first, first + args.scenes), sheet)
-    indoor = evaluate_indoor(range(indoor_first, indoor_first + args.indoor), sheet)
-    kitti = evaluate_kitti(args.data / KITTI_DIR, sheet)
+    rendered = evaluate_rendered(range(first, first + args.scenes), sheet, baseline=baseline)
+    indoor = evaluate_indoor(range(indoor_first, indoor_first + args.indoor), sheet,
+                             baseline=baseline)
+    kitti = evaluate_kitti(args.data / KITTI_DIR, sheet, baseline)
     frames = [random_scene(seed) for seed in range(first, first + 4)]
-    times = time_masks(frames, args.repeats)
+    times = time_masks(frames, args.repeats, baseline)
     text = summary(rendered, indoor, kitti, times, args.held_out)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / 'mask_summary.txt').write_text(text, encoding='utf-8')

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from domplane_ros.core.homography import (apply_homography, fit_homography,
+from domplane_ros.core.homography import (apply_homography, corner_distance_px, fit_homography,
                                           fit_homography_dlt, NormalisedRefiner,
                                           refine_homography, transfer_error)
 from domplane_ros.core.result import FailedEstimate
@@ -114,3 +114,13 @@ def test_gauss_newton_never_increases_transfer_energy(seed, noise, shift):
     assert after <= before
     e_out = 0.5 * np.sum(transfer_error(out, src, dst) ** 2)
     assert e_out == pytest.approx(after, rel=1e-6, abs=1e-9)
+
+
+def test_corner_distance_is_the_largest_corner_displacement():
+    shift = np.array([[1.0, 0.0, 3.0], [0.0, 1.0, -4.0], [0.0, 0.0, 1.0]])
+    assert corner_distance_px(np.eye(3), shift, 640, 480) == pytest.approx(5.0)
+    scale = np.diag([1.01, 1.0, 1.0])  # 1 % wider: the right corners move 6.39 px
+    assert corner_distance_px(np.eye(3), scale, 640, 480) == pytest.approx(6.39)
+    to_infinity = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0 / 639.0, 0.0, 1.0]])
+    # A corner mapped to infinity: a distance no threshold passes.
+    assert corner_distance_px(np.eye(3), to_infinity, 640, 480) > 1e6

@@ -296,6 +296,13 @@ def test_big_endian_array_is_written_little_endian():
     assert fields['data'] == b'\x01\x00\x02\x01'
 
 
+def test_float_fields_are_little_endian_32fc1():
+    native = np.array([[-1.0, 0.25], [3.5, 1e6]], dtype='>f4')  # big-endian input
+    fields = gray_to_image_fields(native, '32FC1')
+    assert (fields['encoding'], fields['step'], fields['is_bigendian']) == ('32FC1', 8, 0)
+    np.testing.assert_array_equal(np.frombuffer(fields['data'], '<f4').reshape(2, 2), native)
+
+
 @pytest.mark.parametrize('encoding', ['rgb8', 'bgr8'])
 def test_rgb_fields_round_trip(encoding):
     native = np.random.default_rng(4).integers(0, 256, (3, 5, 3), dtype=np.uint8)
@@ -311,6 +318,8 @@ def test_rgb_fields_round_trip(encoding):
     (gray_to_image_fields, np.zeros((0, 2), np.uint8), 'mono8', 'shape (H, W)'),
     (gray_to_image_fields, np.zeros((2, 2), np.float32), 'mono8', 'dtype uint8'),
     (gray_to_image_fields, np.zeros((2, 2), np.uint8), 'mono16', 'dtype uint16'),
+    (gray_to_image_fields, np.zeros((2, 2), np.float64), '32FC1', 'dtype float32'),
+    (gray_to_image_fields, np.array([[0.0, np.nan]], np.float32), '32FC1', 'non-finite'),
     (rgb_to_image_fields, np.zeros((2, 2, 3), np.uint8), 'mono8', 'rgb8 or bgr8'),
     (rgb_to_image_fields, np.zeros((2, 2, 4), np.uint8), 'rgb8', 'shape (H, W, 3)'),
     (rgb_to_image_fields, np.zeros((2, 2, 3), np.uint16), 'rgb8', 'dtype uint8'),

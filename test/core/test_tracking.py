@@ -9,7 +9,7 @@ from domplane_ros.config import TrackingConfig
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.prior import intrinsics, plane_homography
 from domplane_ros.core.tracking import (camera_motion, fit_camera_motion, predict_plane_homography,
-                                        track_points)
+                                        track_forward, track_points)
 from domplane_ros.sim.generators import random_scene
 import numpy as np
 import pytest
@@ -117,3 +117,51 @@ def test_track_points_validates_inputs():
         track_points(img, img, np.zeros((3, 3)))
     src, dst = track_points(img, img, np.empty((0, 2)))
     assert src.shape == dst.shape == (0, 2)
+
+
+def test_forward_tracking_recovers_a_warp_and_uses_the_guess():
+    """Forward-only LK through a known warp lands on the warped points (sub-pixel)."""
+    frame = random_scene(11, floor='random', n_boxes=0)
+    m = np.array([[0.995, -0.03, 14.0], [0.025, 1.0, 9.0], [1e-5, 2e-5, 1.0]])
+    warped = cv2.warpPerspective(frame.left, m, (W, H), flags=cv2.INTER_LINEAR)
+    corners = cv2.goodFeaturesToTrack(frame.left, 300, 0.01, 8).reshape(-1, 2).astype(float)
+    kept, target = track_forward(frame.left, warped, corners, 11, 3)
+    assert kept.size > 200 and target.shape == (kept.size, 2)
+    inside = np.all((corners[kept] > 40) & (corners[kept] < [W - 40, H - 40]), axis=1)
+    err = np.linalg.norm(target[inside] - apply_homography(m, corners[kept][inside]), axis=1)
+    assert np.median(err) < 0.1, np.median(err)
+    # A guess near the truth with no pyramid (so no search range of its own): still there.
+    guess = apply_homography(m, corners) + 0.8
+    kept0, target0 = track_forward(frame.left, warped, corners, 11, 0, initial=guess)
+    inside0 = np.all((corners[kept0] > 40) & (corners[kept0] < [W - 40, H - 40]), axis=1)
+    err0 = np.linalg.norm(target0[inside0] - apply_homography(m, corners[kept0][inside0]),
+                          axis=1)
+    assert np.median(err0) < 0.1, np.median(err0)
+    # Without the guess and without a pyramid the 15 px motion is out of reach.
+    kept1, target1 = track_forward(frame.left, warped, corners, 11, 0)
+    err1 = np.linalg.norm(target1 - apply_homography(m, corners[kept1]), axis=1)
+    assert np.median(err1) > 1.0, np.median(err1)
+
+
+def test_track_forward_validates_inputs():
+    img = np.zeros((20, 30), np.uint8)
+    with pytest.raises(ValueError, match='shapes differ'):
+        track_forward(img, np.zeros((21, 30), np.uint8), np.zeros((1, 2)))
+    with pytest.raises(ValueError, match=r'\(N, 2\)'):
+        track_forward(img, img, np.zeros((3, 3)))
+    kept, target = track_forward(img, img, np.empty((0, 2)))
+    assert kept.shape == (0,) and target.shape == (0, 2)
+
+
+def test_forward_backward_zero_tracks_forward_only():
+    """forward_backward_px 0 keeps what forward LK keeps; a round-trip bound drops more."""
+    frame = random_scene(12, floor='random', n_boxes=2)
+    m = np.array([[1.0, -0.02, 6.0], [0.02, 1.0, 4.0], [0.0, 0.0, 1.0]])
+    warped = cv2.warpPerspective(frame.left, m, (W, H), flags=cv2.INTER_LINEAR)
+    warped[100:200, 100:300] = 255 - warped[100:200, 100:300]  # a changed region
+    corners = cv2.goodFeaturesToTrack(frame.left, 300, 0.01, 8).reshape(-1, 2).astype(float)
+    src, dst = track_points(frame.left, warped, corners, 11, 3, forward_backward_px=0.0)
+    kept, target = track_forward(frame.left, warped, corners, 11, 3)
+    assert np.array_equal(src, corners[kept]) and np.array_equal(dst, target)
+    checked, _ = track_points(frame.left, warped, corners, 11, 3, forward_backward_px=0.5)
+    assert 0 < checked.shape[0] < src.shape[0]

@@ -35,7 +35,7 @@ def _to_rclpy(msg) -> Image:
 def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
     write_bag(tmp_path / 'in', frames, 'mcap')
     replayed = []
-    run_replay(tmp_path / 'in', tmp_path / 'out', on_frame=replayed.append)
+    run_replay(tmp_path / 'in', tmp_path / 'out', on_frame=replayed.append, parallax=True)
     with BagInput(tmp_path / 'in', LEFT, RIGHT) as bag:
         pairs = list(pair_messages(((m.side, m.msg) for m in bag.messages()),
                                    ApproximateTimeSync(0.01, 5)))
@@ -50,12 +50,14 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
         pub_right = driver.create_publisher(Image, 'right/image_raw', qos_profile_sensor_data)
         homographies: list[Float64MultiArray] = []
         masks: list[Image] = []
+        parallax: list[Image] = []
         diagnostics: list[DiagnosticArray] = []
         results: list[DiagnosticArray] = []
         driver.create_subscription(DiagnosticArray, 'plane/result', results.append, 10)
         driver.create_subscription(Float64MultiArray, 'plane/homography',
                                    homographies.append, 10)
         driver.create_subscription(Image, 'plane/mask', masks.append, 10)
+        driver.create_subscription(Image, 'plane/parallax', parallax.append, 10)
         driver.create_subscription(DiagnosticArray, '/diagnostics', diagnostics.append, 10)
         executor.add_node(node)
         executor.add_node(driver)
@@ -71,6 +73,7 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
         assert spin_until(lambda: pub_left.get_subscription_count()
                           and pub_right.get_subscription_count()
                           and node._pub_mask.get_subscription_count()
+                          and node._pub_parallax.get_subscription_count()
                           and node._pub_h.get_subscription_count(), 15.0), 'no discovery'
 
         def mask_stamps():
@@ -91,7 +94,7 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
         spin_until(lambda: len(homographies) >= len(expected_h)
                    and diagnostics and diagnostics[-1].status[0].values
                    and node.session.counters.processed == N_FRAMES
-                   and len(results) == N_FRAMES, 5.0)
+                   and len(results) == N_FRAMES and len(parallax) == N_FRAMES, 5.0)
         spin_until(lambda: False, 0.3)   # anything late would show up as an extra message
     finally:
         executor.shutdown()
@@ -116,6 +119,15 @@ def test_live_node_gives_the_replay_results(ros_context, tmp_path, frames):
         assert ([(kv.key, kv.value) for kv in live.status[0].values]
                 == [(kv.key, kv.value) for kv in offline.status[0].values])
         assert live.status[0].level == bytes([offline.status[0].level])
+    # plane_replay --parallax writes the node's parallax images, byte for byte.
+    replay_parallax = read_bag(tmp_path / 'out')['messages']['/plane/parallax']
+    assert [stamp for stamp, _ in replay_parallax] == mask_stamps()
+    assert len(parallax) == N_FRAMES
+    for live, (stamp, offline) in zip(parallax, replay_parallax):
+        assert live.header.stamp.sec * 10**9 + live.header.stamp.nanosec == stamp
+        assert (live.encoding, live.height, live.width, live.step) == (
+            offline.encoding, offline.height, offline.width, offline.step)
+        assert bytes(live.data) == np.asarray(offline.data, np.uint8).tobytes()
     # The replay's diagnostics carry the node's keys.
     node_keys = [kv.key for kv in diagnostics[-1].status[0].values]
     replay_diag = read_bag(tmp_path / 'out')['messages']['/diagnostics'][-1][1]

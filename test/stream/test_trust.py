@@ -9,8 +9,9 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import PlaneNodeConfig, VerificationSettings
-from domplane_ros.core.estimator import estimate_plane
+from domplane_ros.core.estimator import estimate_plane, TwoStep
 from domplane_ros.core.features import detect_corners
+from domplane_ros.core.homography import corner_distance_px
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import cut_sequence, plane_error_px, RigError, rough_rig, swapped
 from domplane_ros.stream import trust as trust_module
@@ -174,3 +175,34 @@ def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatc
     else:
         # Fails if the challenger runs although it is switched off.
         assert 'challenger' not in starts and min(errors) > 1.5, (starts, errors)
+
+
+def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
+    settings = replace(LOW_GATE, challenge_period=3)
+    pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
+    result = None
+    for i in range(2):
+        result = pipeline.process(scene.left, scene.right, i * PERIOD_NS)
+    assert result.ok and plane_error_px(scene, result.homography) < 1.0
+    lock = result.homography
+    near = [lock, _shifted(lock, 3.0, -2.0)]
+    far = [_shifted(lock, 40.0), _shifted(lock, 41.0)]  # two starts, one refined
+    monkeypatch.setattr(pipeline._trust, 'coarse_candidates',
+                        lambda left, right: np.stack(near + far))
+    starts = []
+    original = TwoStep.estimate
+
+    def recording(self, init, options):
+        starts.append(np.array(init))
+        return original(self, init, options)
+
+    monkeypatch.setattr(TwoStep, 'estimate', recording)
+    # The challenge is spread over pairs: the coarse alignment in the first, then one start
+    # per pair (moved through the tracked motion: here the same images, so nearly nowhere).
+    for i in range(2, 6):
+        pipeline.process(scene.left, scene.right, i * PERIOD_NS)
+    height, width = scene.left.shape
+    # (The lock itself is each pair's warm start, so it is not counted.)
+    refined = [sum(corner_distance_px(s, c, width, height) < 0.5 for s in starts)
+               for c in (near[1], far[0], far[1])]
+    assert refined == [0, 1, 0], refined

@@ -1,0 +1,113 @@
+"""The challenge of a lock, spread over pairs so that no pair pays for all of it.
+
+Every ``verification.challenge_period`` locked pairs the pipeline lets other planes challenge
+the lock (a lock that slid into a look-alike is not caught by its own verification). The
+challengers are the coarse photometric alignment's planes and the prior's best-screened
+candidates, each refined on the features and verified. Done in one pair that cost 250-350 ms
+at 640 x 480 (eight to ten warm pairs), so the challenge is a queue of tasks, one per locked
+pair, each bounded by one refinement or one screening (measured 10-45 ms):
+
+1. ``coarse``: the coarse alignment of this pair; its planes become ``coarse start`` tasks,
+   except starts within :data:`NEAR_LOCK_PX` of the lock or of a start already queued (they
+   converge to the lock or to the same plane: measured, starts 1.8 to 11.8 px from the lock
+   ended within 0.22 px of it);
+2. one ``coarse start`` per pair: refined from the start moved through the cameras' motion
+   since (``H' = M_right H M_left^-1``, as the lock's prediction), verified, and taken if it
+   beats the lock; without a motion the coarse starts are dropped;
+3. ``screen``: the prior's screening on this pair; its best :data:`PRIOR_STARTS` candidates
+   (fixed homographies of the camera model, no motion) become ``prior start`` tasks.
+
+A challenger that wins ends the challenge; so do a lost lock and a reset.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Iterable
+
+from domplane_ros.core.homography import corner_distance_px
+from domplane_ros.core.tracking import predict_plane_homography
+import numpy as np
+
+COARSE = 'coarse'
+SCREEN = 'screen'
+COARSE_START = 'coarse start'
+PRIOR_START = 'prior start'
+# Prior candidates (best screening energy first) refined as challengers beside the coarse
+# alignment's planes: the coarse flow misses floors that the prior's screening finds.
+PRIOR_STARTS = 2
+# A challenger's start this close to the lock at the image corners (pixels) is not refined:
+# it would converge to the lock (the default potential's basin is ~10 px, docs/BENCHMARKS.md);
+# a look-alike one plank or tile off lies 20-80 px away.
+NEAR_LOCK_PX = 8.0
+
+
+@dataclass
+class Task:
+    """One step of a challenge: its kind and, for a start, the (3, 3) start homography."""
+
+    kind: str
+    start: np.ndarray | None = None
+
+
+class Challenge:
+    """The pending tasks of one challenge of the lock (see the module docstring)."""
+
+    def __init__(self) -> None:
+        """Start with the coarse alignment, then the prior's screening."""
+        self._tasks: deque[Task] = deque([Task(COARSE), Task(SCREEN)])
+
+    @property
+    def done(self) -> bool:
+        """Return True when no task is left."""
+        return not self._tasks
+
+    def next_task(self) -> Task | None:
+        """Return the next task, or None when the challenge is done."""
+        return self._tasks.popleft() if self._tasks else None
+
+    def follow(self, motions: tuple[np.ndarray, np.ndarray] | None) -> None:
+        """Move the queued coarse starts through the cameras' motion (drop them without one).
+
+        Args:
+            motions: ``(M_left, M_right)`` (3, 3) float64 from the previous pair to this one,
+                or None.
+
+        """
+        kept: deque[Task] = deque()
+        for task in self._tasks:
+            if task.kind == COARSE_START:
+                moved = None if motions is None else predict_plane_homography(
+                    task.start, motions[0], motions[1])
+                if moved is None:
+                    continue
+                task = Task(COARSE_START, moved)
+            kept.append(task)
+        self._tasks = kept
+
+    def add_coarse_starts(self, starts: Iterable[np.ndarray], lock: np.ndarray,
+                          size: tuple[int, int]) -> int:
+        """Queue the coarse alignment's planes, next, except those near the lock or each other.
+
+        Args:
+            starts: (3, 3) float64 planes of the coarse alignment of this pair.
+            lock: (3, 3) float64 the lock's homography in this pair.
+            size: ``(width, height)`` of the images, pixels.
+
+        Returns:
+            The number of starts queued.
+
+        """
+        queued = [lock]
+        new = []
+        for start in starts:
+            if all(corner_distance_px(start, other, *size) >= NEAR_LOCK_PX for other in queued):
+                queued.append(start)
+                new.append(Task(COARSE_START, np.asarray(start, np.float64)))
+        self._tasks.extendleft(reversed(new))
+        return len(new)
+
+    def add_prior_starts(self, starts: Iterable[np.ndarray]) -> None:
+        """Queue the prior's best-screened candidates, last."""
+        self._tasks.extend(Task(PRIOR_START, np.asarray(s, np.float64)) for s in starts)

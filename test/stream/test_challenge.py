@@ -1,0 +1,48 @@
+"""The challenge queue: one bounded task per locked pair, starts moved with the cameras."""
+
+from __future__ import annotations
+
+from domplane_ros.core.homography import corner_distance_px
+from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, NEAR_LOCK_PX,
+                                           PRIOR_START, SCREEN)
+import numpy as np
+
+SIZE = (640, 480)
+
+
+def _shift(dx: float, dy: float = 0.0) -> np.ndarray:
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
+
+
+def _drain(challenge):
+    kinds = []
+    while (task := challenge.next_task()) is not None:
+        kinds.append(task.kind)
+    return kinds
+
+
+def test_tasks_come_in_order_and_near_starts_are_dropped():
+    lock = _shift(30.0)
+    challenge = Challenge()
+    assert challenge.next_task().kind == COARSE
+    starts = [lock, _shift(30.0 + NEAR_LOCK_PX / 2), _shift(80.0), _shift(81.0), _shift(-40.0)]
+    assert challenge.add_coarse_starts(starts, lock, SIZE) == 2  # 80 and -40 px
+    challenge.add_prior_starts([_shift(5.0)])
+    first = challenge.next_task()
+    assert first.kind == COARSE_START and corner_distance_px(first.start, _shift(80.0),
+                                                             *SIZE) < 1e-9
+    assert _drain(challenge) == [COARSE_START, SCREEN, PRIOR_START]
+    assert challenge.done and challenge.next_task() is None
+
+
+def test_coarse_starts_follow_the_cameras_and_are_dropped_without_motion():
+    challenge = Challenge()
+    challenge.next_task()
+    challenge.add_coarse_starts([_shift(80.0), _shift(-40.0)], np.eye(3), SIZE)
+    challenge.add_prior_starts([_shift(5.0)])
+    # The left camera moved 10 px right, the right camera 4 px down: H' = M_r H M_l^-1.
+    challenge.follow((_shift(10.0), _shift(0.0, 4.0)))
+    task = challenge.next_task()
+    assert corner_distance_px(task.start, _shift(70.0, 4.0), *SIZE) < 1e-9
+    challenge.follow(None)  # no motion: the remaining coarse start is stale
+    assert _drain(challenge) == [SCREEN, PRIOR_START]
