@@ -408,7 +408,7 @@ class PlanePipeline:
             self._challenge.add_prior_starts(search.candidates[i] for i in
                                              search.ranked()[:PRIOR_STARTS])
         else:
-            result = problem.estimate(task.start, self.config.estimator)
+            result = problem.estimate(task.start, self.config.estimator, widen=False)
             if result.ok and not self._checks.rejection_reason(
                     result, feats, size, bounds=task.kind == PRIOR_START):
                 best, verdict, _ = self._trust.pick(step.left, step.right, [result],
