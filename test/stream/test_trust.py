@@ -192,9 +192,9 @@ def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
     starts = []
     original = TwoStep.estimate
 
-    def recording(self, init, options):
+    def recording(self, init, options, **kwargs):
         starts.append(np.array(init))
-        return original(self, init, options)
+        return original(self, init, options, **kwargs)
 
     monkeypatch.setattr(TwoStep, 'estimate', recording)
     # The challenge is spread over pairs: the coarse alignment in the first, then one start
