@@ -99,15 +99,36 @@ class Challenge:
             The number of starts queued.
 
         """
-        queued = [lock]
-        new = []
-        for start in starts:
-            if all(corner_distance_px(start, other, *size) >= NEAR_LOCK_PX for other in queued):
-                queued.append(start)
-                new.append(Task(COARSE_START, np.asarray(start, np.float64)))
+        new = [Task(COARSE_START, start) for start in distinct_starts(starts, size, lock)]
         self._tasks.extendleft(reversed(new))
         return len(new)
 
     def add_prior_starts(self, starts: Iterable[np.ndarray]) -> None:
         """Queue the prior's best-screened candidates, last."""
         self._tasks.extend(Task(PRIOR_START, np.asarray(s, np.float64)) for s in starts)
+
+
+def distinct_starts(starts: Iterable[np.ndarray], size: tuple[int, int],
+                    lock: np.ndarray | None = None) -> list[np.ndarray]:
+    """Return the starts, in order, without those near the lock or an earlier start.
+
+    Near: within :data:`NEAR_LOCK_PX` at the image corners; such starts converge to the same
+    plane (measured: starts 1.8 to 11.8 px from a lock ended within 0.22 px of it).
+
+    Args:
+        starts: (3, 3) float64 start homographies.
+        size: ``(width, height)`` of the images, pixels.
+        lock: Optional (3, 3) float64 homography whose neighbours are left out too.
+
+    Returns:
+        The kept starts as (3, 3) float64 arrays.
+
+    """
+    kept: list[np.ndarray] = []
+    others = [] if lock is None else [lock]
+    for start in starts:
+        start = np.asarray(start, np.float64)
+        if all(corner_distance_px(start, other, *size) >= NEAR_LOCK_PX for other in others):
+            others.append(start)
+            kept.append(start)
+    return kept

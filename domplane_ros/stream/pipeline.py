@@ -24,7 +24,8 @@ from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
-from domplane_ros.stream.challenge import Challenge, COARSE, PRIOR_START, PRIOR_STARTS, SCREEN
+from domplane_ros.stream.challenge import (Challenge, COARSE, distinct_starts, PRIOR_START,
+                                           PRIOR_STARTS, SCREEN)
 from domplane_ros.stream.detection import carried_features, detect_features, full_mask
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
@@ -424,9 +425,14 @@ class PlanePipeline:
 
     def _coarse_estimates(self, step: _Step, problem: TwoStep, feats: Features,
                           size: tuple[int, int]) -> list[PlaneEstimate]:
-        """Return the refined, unrejected planes of the coarse photometric alignment."""
+        """Return the refined, unrejected planes of the coarse photometric alignment.
+
+        A start within :data:`~domplane_ros.stream.challenge.NEAR_LOCK_PX` of one refined
+        already is not refined again (the parts of the image often give the same plane).
+        """
         out = []
-        for start in self._trust.coarse_candidates(step.left, step.right):
+        for start in distinct_starts(self._trust.coarse_candidates(step.left, step.right),
+                                     size):
             result = problem.estimate(start, self.config.estimator, widen=False)
             if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)

@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from domplane_ros.core.homography import corner_distance_px
-from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, NEAR_LOCK_PX,
-                                           PRIOR_START, SCREEN)
+from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, distinct_starts,
+                                           NEAR_LOCK_PX, PRIOR_START, SCREEN)
 import numpy as np
 
 SIZE = (640, 480)
@@ -46,3 +46,13 @@ def test_coarse_starts_follow_the_cameras_and_are_dropped_without_motion():
     assert corner_distance_px(task.start, _shift(70.0, 4.0), *SIZE) < 1e-9
     challenge.follow(None)  # no motion: the remaining coarse start is stale
     assert _drain(challenge) == [SCREEN, PRIOR_START]
+
+
+def test_distinct_starts_keep_the_first_of_each_neighbourhood():
+    starts = [_shift(0.0), _shift(NEAR_LOCK_PX / 2), _shift(50.0), _shift(50.0, 3.0),
+              _shift(-50.0)]
+    kept = distinct_starts(starts, SIZE)
+    assert [corner_distance_px(k, s, *SIZE) for k, s in zip(kept, starts[::2])] == [0, 0, 0]
+    assert len(kept) == 3
+    # With a lock at 50 px, its neighbours go too.
+    assert len(distinct_starts(starts, SIZE, lock=_shift(49.0))) == 2
