@@ -1,4 +1,4 @@
-"""What the pipeline made of one stereo pair, and its debug picture."""
+"""What the pipeline made of one stereo pair, its debug picture, and its working state."""
 
 from __future__ import annotations
 
@@ -111,3 +111,32 @@ def parallax_image(result: FrameResult) -> np.ndarray:
     if result.parallax is None:
         return np.full(result.mask.shape, NOT_MEASURED, np.float32)
     return ParallaxMask(result.mask, result.parallax).parallax_image()
+
+
+@dataclass
+class PairStep:
+    """What the pipeline's estimation of one pair got to (its working state, not a result)."""
+
+    estimate: PlaneEstimate | FailedEstimate | None = None
+    accepted: bool = False
+    reason: str = ''
+    warm_start: str = ''
+    prediction: np.ndarray | None = None
+    candidates: int = 0
+    reinitialised: bool = False
+    keep_previous: bool = False
+    confidence: float = 0.0
+    initial: PlaneEstimate | None = None
+    left: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
+    right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
+
+
+def stage_timings_ms(t0: float, spans: tuple[float, float], t3: float, t4: float, t5: float
+                     ) -> dict[str, float]:
+    """Return the milliseconds of the features, tracking, estimate and mask, and the total.
+
+    ``spans`` are the seconds of the features and the tracking (which interleave); the
+    estimate runs from ``t3`` to ``t4``, the mask from ``t4`` to ``t5``.
+    """
+    return {'features': 1e3 * spans[0], 'tracking': 1e3 * spans[1],
+            'estimate': 1e3 * (t4 - t3), 'mask': 1e3 * (t5 - t4), 'total': 1e3 * (t5 - t0)}

@@ -27,7 +27,7 @@ from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.challenge import (Challenge, COARSE, distinct_starts, PRIOR_START,
                                            PRIOR_STARTS, SCREEN)
 from domplane_ros.stream.detection import carried_features, detect_features, full_mask
-from domplane_ros.stream.frame import debug_overlay, FrameResult
+from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import enough_carried, FrameTracker
 from domplane_ros.stream.trust import TrustGate, Verdict
@@ -182,7 +182,7 @@ class PlanePipeline:
         feats, track_pts, motions, carried, spans = self._features(*work)
         self.stats.carried += carried is not None
         t3 = time.perf_counter()
-        step = self._estimate(_Step(left=left, right=right), feats, motions, fast)
+        step = self._estimate(PairStep(left=left, right=right), feats, motions, fast)
         t4 = time.perf_counter()
         estimate, h, mask, parallax = self._publish(step, *work, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)
@@ -197,14 +197,14 @@ class PlanePipeline:
                            left_points=feats.left_points,
                            right_points=feats.right_points, reinitialised=step.reinitialised,
                            reason=reason, state=self._state,
-                           timings_ms=_timings_ms(t0, spans, t3, t4, t5),
+                           timings_ms=stage_timings_ms(t0, spans, t3, t4, t5),
                            warnings=check.warnings, left_lines=feats.left_lines,
                            right_lines=feats.right_lines, warm_start=step.warm_start,
                            prediction=step.prediction, candidates=step.candidates,
                            fast_motion=fast, confidence=step.confidence)
 
-    def _estimate(self, step: _Step, feats: Features,
-                  motions: tuple[np.ndarray, np.ndarray] | None, fast: bool) -> _Step:
+    def _estimate(self, step: PairStep, feats: Features,
+                  motions: tuple[np.ndarray, np.ndarray] | None, fast: bool) -> PairStep:
         """Estimate this frame's plane as the lock state says: warm start, then search."""
         height, width = step.left.shape
         size = (width, height)
@@ -217,7 +217,7 @@ class PlanePipeline:
             self._search_step(step, feats, problem, size, motions)
         return step
 
-    def _publish(self, step: _Step, left: WorkingImage, right: WorkingImage, feats: Features
+    def _publish(self, step: PairStep, left: WorkingImage, right: WorkingImage, feats: Features
                  ) -> tuple[PlaneEstimate | FailedEstimate, np.ndarray | None, np.ndarray,
                             np.ndarray | None]:
         """Return the frame's estimate, homography, mask and parallax; keep an accepted plane.
@@ -258,7 +258,7 @@ class PlanePipeline:
         """
         self.stats.failed += 1
         if self._state != SEARCHING:
-            self._lose_frame(_Step(keep_previous=True), None)
+            self._lose_frame(PairStep(keep_previous=True), None)
         empty = np.zeros((0, 2), np.float64)
         total_ms = 1e3 * (time.perf_counter() - t0)
         return FrameResult(stamp_ns=stamp_ns, ok=False, homography=None,
@@ -313,7 +313,7 @@ class PlanePipeline:
         return predict_plane_homography(h, motions[0], motions[1])
 
     # --- Locked and tracking ---------------------------------------------------------------
-    def _track_or_lock(self, step: _Step, feats: Features, problem: TwoStep | FailedEstimate,
+    def _track_or_lock(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
                        size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
                        fast: bool) -> None:
         assert self._last_h is not None
@@ -354,7 +354,7 @@ class PlanePipeline:
         step.reason = reason
         self._lose_frame(step, prediction)
 
-    def _warm_check(self, step: _Step, estimate: PlaneEstimate | FailedEstimate,
+    def _warm_check(self, step: PairStep, estimate: PlaneEstimate | FailedEstimate,
                     feats: Features, size: tuple[int, int], fast: bool, count: bool
                     ) -> tuple[str, Verdict | None]:
         """Return why a warm estimate is refused ('' if not) and the verification's verdict."""
@@ -371,7 +371,7 @@ class PlanePipeline:
                                     self.config.features.roi, locked=True)
         return verdict.reason, verdict
 
-    def _verified(self, step: _Step, estimate: PlaneEstimate, verdict: Verdict) -> None:
+    def _verified(self, step: PairStep, estimate: PlaneEstimate, verdict: Verdict) -> None:
         """Publish a verified plane: lock on it."""
         step.estimate, step.accepted, step.confidence = estimate, True, verdict.confidence
         self._trust.record(verdict)
@@ -379,7 +379,7 @@ class PlanePipeline:
         self._search = None
         self._tracking_frames = 0
 
-    def _challenge_step(self, step: _Step, lock: Verdict, problem: TwoStep | FailedEstimate,
+    def _challenge_step(self, step: PairStep, lock: Verdict, problem: TwoStep | FailedEstimate,
                         feats: Features, size: tuple[int, int],
                         motions: tuple[np.ndarray, np.ndarray] | None) -> None:
         """Every few locked pairs, let other planes challenge the lock, one task per pair.
@@ -423,7 +423,7 @@ class PlanePipeline:
         if self._challenge.done:
             self._challenge = None
 
-    def _coarse_estimates(self, step: _Step, problem: TwoStep, feats: Features,
+    def _coarse_estimates(self, step: PairStep, problem: TwoStep, feats: Features,
                           size: tuple[int, int]) -> list[PlaneEstimate]:
         """Return the refined, unrejected planes of the coarse photometric alignment.
 
@@ -452,7 +452,7 @@ class PlanePipeline:
                 out.append(result)
         return out, rejection
 
-    def _lose_frame(self, step: _Step, prediction: np.ndarray | None) -> None:
+    def _lose_frame(self, step: PairStep, prediction: np.ndarray | None) -> None:
         """Failed or suspicious: carry the plane forward (tracking) or give up (searching)."""
         self._tracking_frames += 1
         if self._tracking_frames <= self.config.pipeline.max_tracking_frames:
@@ -499,7 +499,7 @@ class PlanePipeline:
         self._search = None
         self._challenge = None
 
-    def _search_step(self, step: _Step, feats: Features, problem: TwoStep | FailedEstimate,
+    def _search_step(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
                      ) -> None:
         """Refine the next candidates; publish the best verified plane (TrustGate.pick)."""
@@ -529,7 +529,7 @@ class PlanePipeline:
             return
         self._end_search(step, pool, rejection, unverified)
 
-    def _search_pool(self, step: _Step, search: _Search, problem: TwoStep, feats: Features,
+    def _search_pool(self, step: PairStep, search: _Search, problem: TwoStep, feats: Features,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
                      ) -> tuple[list[PlaneEstimate], str, int]:
         """Return this frame's refined candidates, the last rejection and the search's size.
@@ -575,7 +575,7 @@ class PlanePipeline:
             return None
         return best
 
-    def _end_search(self, step: _Step, pool: list[PlaneEstimate], rejection: str,
+    def _end_search(self, step: PairStep, pool: list[PlaneEstimate], rejection: str,
                     unverified: str) -> None:
         """No verified plane: say why, and start again with the next frame's features."""
         if unverified:
@@ -592,35 +592,6 @@ class PlanePipeline:
         if size not in self._candidates_cache:
             self._candidates_cache[size] = prior_candidates(self.config.prior, *size)
         return self._candidates_cache[size]
-
-
-@dataclass
-class _Step:
-    """What one frame's estimation got to (internal)."""
-
-    estimate: PlaneEstimate | FailedEstimate | None = None
-    accepted: bool = False
-    reason: str = ''
-    warm_start: str = ''
-    prediction: np.ndarray | None = None
-    candidates: int = 0
-    reinitialised: bool = False
-    keep_previous: bool = False
-    confidence: float = 0.0
-    initial: PlaneEstimate | None = None
-    left: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
-    right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
-
-
-def _timings_ms(t0: float, spans: tuple[float, float], t3: float, t4: float, t5: float
-                ) -> dict[str, float]:
-    """Return the milliseconds of the features, tracking, estimate and mask, and the total.
-
-    ``spans`` are the seconds of the features and the tracking (which interleave); the
-    estimate runs from ``t3`` to ``t4``, the mask from ``t4`` to ``t5``.
-    """
-    return {'features': 1e3 * spans[0], 'tracking': 1e3 * spans[1],
-            'estimate': 1e3 * (t4 - t3), 'mask': 1e3 * (t5 - t4), 'total': 1e3 * (t5 - t0)}
 
 
 def _check_frame(left: np.ndarray, right: np.ndarray, joint_speed: float | None) -> None:
