@@ -26,7 +26,6 @@ import numpy as np
 _MIN_RESPONSE = 1e-7
 # Three iterations are enough: the start is within a pixel of the corner (measured).
 _SUBPIX_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 3, 0.1)
-_CARRIED_CRITERIA = (cv2.TERM_CRITERIA_EPS + cv2.TERM_CRITERIA_COUNT, 20, 0.01)
 
 
 class Features(NamedTuple):
@@ -239,24 +238,21 @@ def _refine_subpixel(gray: np.ndarray, response: np.ndarray, xs: np.ndarray, ys:
     return np.where(good[:, None], refined, peak)
 
 
-def refine_corners(gray: np.ndarray, points: np.ndarray, config: FeatureConfig,
-                   roi: Sequence[float] | None = None, subpixel: bool = True
-                   ) -> tuple[np.ndarray, np.ndarray]:
-    """Re-refine corners found by other means (tracked into this image) on the image's corners.
+def corners_in_region(gray: np.ndarray, points: np.ndarray, config: FeatureConfig,
+                      roi: Sequence[float] | None = None) -> np.ndarray:
+    """Return the indices of points where :func:`detect_corners` could have found a corner.
 
-    ``cv2.cornerSubPix`` with the detector's window, as :func:`detect_corners` ends; a point
-    whose refinement leaves its window (no corner there any more), or that lies outside the
-    region of interest and the detector's border, is dropped.
+    That is inside the region of interest and at least the detector's border from the image
+    edge (corners tracked into this image from another one keep the detector's rules).
 
     Args:
         gray: (H, W) uint8 image.
-        points: (N, 2) float64 approximate corner positions, pixels.
+        points: (N, 2) float64 positions, pixels.
         config: Detector settings (``block_size`` and the default ``roi``).
         roi: Optional region of interest as fractions; overrides ``config.roi``.
 
     Returns:
-        ``(kept, refined)``: (K,) int64 indices of the kept points and their (K, 2) float64
-        refined positions, in the given order.
+        (K,) int64 indices of the points inside, in the given order.
 
     Raises:
         ValueError: If ``gray`` is not a 2-D uint8 array or ``roi`` is invalid.
@@ -265,20 +261,14 @@ def refine_corners(gray: np.ndarray, points: np.ndarray, config: FeatureConfig,
     x0, y0, x1, y1 = gray_roi(gray, config.roi if roi is None else roi)
     height, width = gray.shape
     points = np.asarray(points, dtype=np.float64).reshape(-1, 2)
-    block = int(config.block_size)
-    border = block // 2 + 2
+    border = int(config.block_size) // 2 + 2
     low = np.array([max(x0, border), max(y0, border)], np.float64)
     high = np.array([min(x1, width - border) - 1, min(y1, height - border) - 1], np.float64)
-    inside = np.flatnonzero(np.all((points >= low) & (points <= high), axis=1))
-    if inside.size == 0 or not subpixel:
-        return inside, points[inside]
-    refined, good = _corner_subpix(gray, points[inside], block, low, high, _CARRIED_CRITERIA)
-    return inside[good], refined[good]
+    return np.flatnonzero(np.all((points >= low) & (points <= high), axis=1))
 
 
 def _corner_subpix(gray: np.ndarray, start: np.ndarray, block: int, low: np.ndarray,
-                   high: np.ndarray, criteria: tuple = _SUBPIX_CRITERIA
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   high: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Return cv2.cornerSubPix positions of (N, 2) ``start`` and (N,) bool: stayed in place.
 
     A refinement is good if it is finite, within its window of the start and inside the
@@ -290,7 +280,7 @@ def _corner_subpix(gray: np.ndarray, start: np.ndarray, block: int, low: np.ndar
     if half < 1:
         return start, np.zeros(start.shape[0], bool)
     refined = cv2.cornerSubPix(gray, start.astype(np.float32).reshape(-1, 1, 2), (half, half),
-                               (-1, -1), criteria).reshape(-1, 2).astype(np.float64)
+                               (-1, -1), _SUBPIX_CRITERIA).reshape(-1, 2).astype(np.float64)
     good = (np.all(np.isfinite(refined), axis=1)
             & np.all(np.abs(refined - start) <= half, axis=1)
             & np.all((refined >= low) & (refined <= high), axis=1))

@@ -108,9 +108,8 @@ def track_forward(previous: np.ndarray, current: np.ndarray, points: np.ndarray,
                   initial: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Track points from one grey image to the next, forward only (pyramidal Lucas-Kanade).
 
-    Half the cost of :func:`track_points`: no tracking back. For tracks that become the next
-    pair's corners (re-refined on the corner there, and judged by the robust motion fit and
-    the estimator), not for a motion fit of its own.
+    Half the cost of :func:`track_points` with its round trip: no tracking back. Bad tracks
+    are left to the robust motion fit (and, for carried corners, to the estimator).
 
     Args:
         previous: (H, W) uint8 previous image.

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import cv2
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.core.features import detect_corners, Features, refine_corners
+from domplane_ros.core.features import corners_in_region, detect_corners, Features
 from domplane_ros.core.lines import detect_lines
 from domplane_ros.core.pyramid import WorkingImage
+from domplane_ros.stream.motion import enough_carried
 import numpy as np
 
 
@@ -38,21 +39,25 @@ def detect_features(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfi
 
 
 def carried_features(left: WorkingImage, right: WorkingImage,
-                     tracked: tuple[np.ndarray, np.ndarray], cfg: PlaneNodeConfig
+                     tracked: tuple[np.ndarray, np.ndarray], counts: tuple[int, int],
+                     cfg: PlaneNodeConfig
                      ) -> tuple[Features, tuple[np.ndarray, np.ndarray],
-                                tuple[np.ndarray, np.ndarray]]:
+                                tuple[np.ndarray, np.ndarray]] | None:
     """Return the features of a pair whose corners were tracked from an earlier pair.
 
     The tracked positions (working pixels) outside the detector's region of interest and
-    border are dropped (:func:`~domplane_ros.core.features.refine_corners`, without sub-pixel
-    refinement: Lucas-Kanade from the image the corners were detected in is the more
-    accurate, measured); segments are detected as :func:`detect_features` does. Also returns
-    the working-level corners, which the tracker uses next, and the indices of the tracked
-    positions kept.
+    border are dropped (:func:`~domplane_ros.core.features.corners_in_region`; no sub-pixel
+    re-refinement: it did not make them more accurate, docs/speed.md). None if
+    too few are left of the earlier pair's ``counts`` (:func:`~domplane_ros.stream.motion.
+    enough_carried`): then the pair detects afresh. Else segments are detected as
+    :func:`detect_features` does, and the working-level corners (which the tracker uses next)
+    and the indices of the tracked positions kept are returned too.
     """
-    kept = tuple(refine_corners(image.image, points, cfg.features, subpixel=False)[0]
+    kept = tuple(corners_in_region(image.image, points, cfg.features)
                  for image, points in zip((left, right), tracked))
     corners = (tracked[0][kept[0]], tracked[1][kept[1]])
+    if not enough_carried(corners, counts):
+        return None
     left_pts, right_pts = (full_corners(image, points)
                            for image, points in zip((left, right), corners))
     left_seg, right_seg = _segments(left, right, cfg)

@@ -118,7 +118,7 @@ class FrameTracker:
         motions = (motion_to_full(fits[0].homography, left.scale),
                    motion_to_full(fits[1].homography, right.scale))
         counts = (cams[0].points.shape[0], cams[1].points.shape[0])
-        if not (carry and self._carried < cfg.reuse_pairs and enough_carried(corners, counts)):
+        if not (carry and self._carried < cfg.reuse_pairs):
             return Tracked(motions)
         return Tracked(motions, (corners[0], corners[1]), counts, (alive[0], alive[1]))
 

@@ -29,7 +29,7 @@ from domplane_ros.stream.challenge import (Challenge, COARSE, distinct_starts, P
 from domplane_ros.stream.detection import carried_features, detect_features, full_mask
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
-from domplane_ros.stream.motion import enough_carried, FrameTracker
+from domplane_ros.stream.motion import FrameTracker
 from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
 
@@ -296,12 +296,14 @@ class PlanePipeline:
             motion=not searching or (self._search is not None and self._search.best is not None),
             carry=not searching)
         t1 = time.perf_counter()
+        carried = None
         if tracked.corners is not None and tracked.alive is not None:
-            feats, corners, kept = carried_features(left, right, tracked.corners, self.config)
-            if enough_carried(corners, tracked.counts):
-                alive = (tracked.alive[0][kept[0]], tracked.alive[1][kept[1]])
-                return feats, corners, tracked.motions, alive, (time.perf_counter() - t1,
-                                                                t1 - t0)
+            carried = carried_features(left, right, tracked.corners, tracked.counts,
+                                       self.config)
+        if carried is not None:
+            feats, corners, kept = carried
+            alive = (tracked.alive[0][kept[0]], tracked.alive[1][kept[1]])
+            return feats, corners, tracked.motions, alive, (time.perf_counter() - t1, t1 - t0)
         feats, corners = detect_features(left, right, self.config)
         corners = self._tracking_points(left, right, corners)
         return feats, corners, tracked.motions, None, (time.perf_counter() - t1, t1 - t0)

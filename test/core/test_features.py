@@ -130,7 +130,7 @@ def test_subpixel_accuracy_on_a_checkerboard():
     assert np.median(distance) < 0.15
 
 
-def test_refine_corners_snaps_to_junctions_and_drops_what_is_outside():
+def test_corners_in_region_keeps_the_detectors_region_and_border():
     offset = (30.3, 40.7)
     image = _checkerboard(*offset)
     junctions = np.array([(offset[0] + 24 * i, offset[1] + 24 * j)
@@ -138,18 +138,12 @@ def test_refine_corners_snaps_to_junctions_and_drops_what_is_outside():
     rng = np.random.default_rng(4)
     start = junctions + rng.uniform(-1.0, 1.0, junctions.shape)
     outside = np.array([[1.0, 1.0], [image.shape[1] - 2.0, 50.0]])  # inside the border
-    kept, refined = features.refine_corners(image, np.vstack([start, outside]),
-                                            FeatureConfig())
+    kept = features.corners_in_region(image, np.vstack([start, outside]), FeatureConfig())
     assert list(kept) == list(range(len(junctions)))
-    assert np.max(np.linalg.norm(refined - junctions, axis=1)) < 0.3
-    # Without sub-pixel refinement only the region filter applies.
-    kept, same = features.refine_corners(image, np.vstack([start, outside]), FeatureConfig(),
-                                         subpixel=False)
-    assert list(kept) == list(range(len(junctions))) and np.array_equal(same, start)
     # A region of interest of the left half keeps the junctions there only.
     roi = (0.0, 0.0, 0.5, 1.0)
     x1 = features.gray_roi(image, roi)[2]
-    kept, _ = features.refine_corners(image, start, FeatureConfig(), roi=roi)
+    kept = features.corners_in_region(image, start, FeatureConfig(), roi=roi)
     assert 0 < len(kept) < len(start)
     assert set(kept) == set(np.flatnonzero(start[:, 0] <= x1 - 1))
 
