@@ -215,10 +215,10 @@ class TrustGate:
         tile or plank off can have the lower energy, never the higher score (measured on the
         same pair). Planes within 0.5 px of one already judged are not verified again. The
         best is published only if its score is at least :data:`CHALLENGE_MARGIN` times that
-        of every distinct plane judged (verified or not, swapped ones included; walls and
-        planes through obstacles do not compete), and of every plane of ``rivals``: (3, 3)
-        homographies judged only as rivals, never published (the swapped cameras' planes,
-        :mod:`domplane_ros.stream.swap`).
+        of every distinct plane judged (verified or not; walls and planes through obstacles do
+        not compete), of every plane of swapped cameras judged (distinct or not) and of every
+        plane of ``rivals``: (3, 3) homographies judged only as rivals, never published (the
+        swapped cameras' planes, :mod:`domplane_ros.stream.swap`).
 
         Returns:
             The best verified estimate and its verdict (None, None if none verified or it is
@@ -246,7 +246,7 @@ class TrustGate:
                        for rival in rivals or []]
             best, best_h, verdict = max(verified, key=lambda item: item[2].score)
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                            if v.ground and _distinct(h, best_h, width, height)]
+                            if _rival(v, h, best_h, width, height)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
             if verdict.uniqueness >= CHALLENGE_MARGIN:
@@ -296,6 +296,18 @@ class TrustGate:
     def beats(self, challenger: Verdict, lock: Verdict) -> bool:
         """Return whether a challenger explains clearly more of the image than the lock."""
         return challenger.accepted and challenger.score > CHALLENGE_MARGIN * lock.score
+
+
+def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,
+           height: int) -> bool:
+    """Return whether a judged plane competes with the best for uniqueness.
+
+    A plane of swapped cameras always does (the other hypothesis about the head, however
+    close it maps: measured, a checker's swapped floor 0.6 px from the truth and a look-alike
+    9 px off it, within 8 px of each other at the image bottom); a plane of this head only
+    when distinct; walls and planes through obstacles never.
+    """
+    return verdict.ground and (verdict.swapped or _distinct(homography, best, width, height))
 
 
 def _distinct(first: np.ndarray, second: np.ndarray, width: int, height: int) -> bool:

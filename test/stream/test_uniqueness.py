@@ -30,7 +30,7 @@ def _run(frame):
 
 @pytest.mark.parametrize('seed', [68, 115])
 def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypatch):
-    # Tiles (68) and a checker of few corners (115, its swapped floor polished, not refined).
+    # Tiles (68) and a checker of few corners (115: its swapped floor polished, not refined).
     frame = swapped(random_scene(seed))
     result = _run(frame)
     assert not result.ok and not result.mask.any() and result.confidence == 0.0
@@ -38,7 +38,18 @@ def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypat
     # Without the swap's rivals a look-alike of the correctly ordered model is published.
     monkeypatch.setattr(pipeline_module, 'swap_rivals', lambda *args, **kwargs: [])
     without = _run(frame)
-    assert without.ok and plane_error_px(frame, without.homography) > 100.0
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+
+
+def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
+    # Checker (seed 0): the swapped floor maps within 8 px of a look-alike 9 px off it.
+    frame = swapped(random_scene(0))
+    result = _run(frame)
+    assert not result.ok and 'swapped' in result.reason, result.reason
+    monkeypatch.setattr(trust_module, '_rival', lambda verdict, h, best, width, height: (
+        verdict.ground and trust_module._distinct(h, best, width, height)))
+    without = _run(frame)
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
 
 
 def test_a_plane_through_boxes_is_not_the_ground(monkeypatch):
