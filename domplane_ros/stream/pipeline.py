@@ -30,6 +30,7 @@ from domplane_ros.stream.detection import carried_features, detect_features, ful
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import FrameTracker
+from domplane_ros.stream.swap import swap_rivals
 from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
 
@@ -74,6 +75,7 @@ class _Search:
     tried: set[int] = field(default_factory=set)
     best: np.ndarray | None = None
     initial_tried: bool = False
+    rivals: list[np.ndarray] | None = None  # planes of swapped cameras (stream/swap.py)
 
 
 class PlanePipeline:
@@ -556,7 +558,7 @@ class PlanePipeline:
         self.stats.candidates += step.candidates
         step.warm_start = 'search'
         best, verdict, unverified = self._trust.pick(step.left, step.right, pool,
-                                                     self.config.features.roi)
+                                                     self.config.features.roi, search.rivals)
         search.best = best.homography if best is not None else None
         if best is not None and verdict is not None:
             if best is step.initial:
@@ -601,6 +603,14 @@ class PlanePipeline:
         refined, rejection = self._refined(prior_search, chosen, feats, size)
         pool += refined
         pool += self._coarse_estimates(step, problem, feats, size)
+        if search.rivals is None:
+            # Once per search the swap is tested, not assumed absent (stream/swap.py).
+            search.rivals = swap_rivals(
+                problem, candidates, limit, cfg.estimator, cfg.prior.screen_threshold_px,
+                lambda estimate: self._checks.rejection_reason(estimate, feats, size,
+                                                               bounds=False),
+                lambda start: self._trust.polish(step.left, step.right, start,
+                                                 cfg.features.roi))
         return pool, rejection, limit
 
     def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,
