@@ -35,10 +35,11 @@ from typing import Any
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
 from domplane_ros.core.homography import (apply_homography, as_homography, as_points,
-                                          check_homography, normalise_scale, NormalisedRefiner,
-                                          point_set_reason)
+                                          check_homography, MIN_DEPTH, normalise_scale,
+                                          NormalisedRefiner, point_set_reason)
 from domplane_ros.core.lines import (as_segments, endpoints, LineMatcher, lines_reason,
                                      screen_line_candidates, segment_lengths)
+from domplane_ros.core.nearest import NearestPoints
 from domplane_ros.core.potentials import make_potential, Potential
 from domplane_ros.core.prior import prior_candidates, PriorSearch, screen_candidates
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
@@ -48,7 +49,7 @@ from scipy.spatial import cKDTree
 __all__ = ['FailedEstimate', 'PlaneEstimate', 'TwoStep', 'can_widen', 'estimate_plane',
            'gnc_scales']
 
-_GLOBAL_STEP_ITERATIONS = 2
+_GLOBAL_STEP_ITERATIONS = 1
 _POLISH_ROUNDS = 2
 _POLISH_STEPS = 2
 _LINE_POLISH_ROUNDS = 12
@@ -136,12 +137,15 @@ class TwoStep:
         self.right = right
         self.tree = tree
         self.n_points = left.shape[0]
+        # Closest right points, re-queried only where a prediction moved far enough.
+        self.nearest = NearestPoints(right, tree) if tree is not None else None
         self.matcher = matcher
         self.left_segments = (left_segments if left_segments is not None and matcher is not None
                               else np.zeros((0, 4)))
         self.n_lines = self.left_segments.shape[0]
         self.line_weight = float(line_weight)
         self.src = np.concatenate([left, endpoints(self.left_segments)])
+        self.src_h = np.column_stack([self.src, np.ones(self.src.shape[0])])
         frame = [right] + ([endpoints(matcher.segments)] if matcher is not None else [])
         self.refiner = NormalisedRefiner(self.src, np.concatenate(frame))
         self.row_feature = np.concatenate([np.arange(self.n_points), np.repeat(
@@ -158,7 +162,10 @@ class TwoStep:
 
     def apply(self, h: np.ndarray) -> np.ndarray:
         """Return the (rows, 2) predictions of every row under ``h``."""
-        return apply_homography(h, self.src)
+        uvw = self.src_h @ h.T
+        if uvw.shape[0] == 0 or np.min(np.abs(uvw[:, 2])) < MIN_DEPTH:
+            return apply_homography(h, self.src)
+        return uvw[:, :2] / uvw[:, 2:3]
 
     def match(self, pred: np.ndarray, bound: float | None = None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -170,19 +177,14 @@ class TwoStep:
         -1 and its own prediction as closest position (the query stops early there).
         """
         n = self.n_points
-        r = np.zeros(self.n_features)
-        idx = np.zeros(self.n_features, np.int64)
+        r = np.empty(self.n_features)
+        idx = np.empty(self.n_features, np.int64)
         closest = np.empty_like(pred)
-        if n and bound is not None:
-            r[:n], idx[:n] = self.tree.query(pred[:n], distance_upper_bound=bound)
-            far = np.flatnonzero(idx[:n] >= self.right.shape[0])
-            idx[far] = 0
+        if n:
+            r[:n], idx[:n] = self.nearest.query(pred[:n], bound)
             closest[:n] = self.right[idx[:n]]
-            idx[far] = -1
+            far = np.flatnonzero(idx[:n] < 0)
             closest[far] = pred[far]
-        elif n:
-            r[:n], idx[:n] = self.tree.query(pred[:n])
-            closest[:n] = self.right[idx[:n]]
         if self.n_lines:
             d, li, c1, c2 = self.matcher.closest(pred[n::2], pred[n + 1::2])
             r[n:], idx[n:] = d, li
@@ -200,7 +202,8 @@ class TwoStep:
         r, idx, closest = self.match(pred, potential.saturation_px)
         s = potential.step(r)
         frac = np.divide(s, r, out=np.zeros_like(r), where=r > 0)
-        aux = pred + (closest - pred) * frac[self.row_feature, None]
+        aux = pred + (closest - pred) * (frac if self.n_lines == 0
+                                         else frac[self.row_feature])[:, None]
         penalty = potential.penalty(r - s)
         terms = self.feature_weight * (0.5 * s * s + penalty)
         return r, idx, aux, penalty, terms, closest
@@ -220,18 +223,17 @@ class TwoStep:
         energies.append(energy)
         weights = self.row_weight
         for it in range(1, options.max_iterations + 1):
-            h_new, e_before, _ = self.refiner.refine(h, aux, weights, _GLOBAL_STEP_ITERATIONS)
-            ext = self.refiner.extrapolate(h, h_new, aux, OVER_RELAXATION, e_before, weights)
-            if ext is not None:
-                h_new = ext[0]
+            h_new = self.refiner.refine(h, aux, weights, _GLOBAL_STEP_ITERATIONS,
+                                        OVER_RELAXATION)[0]
             pred_new = self.apply(h_new)
             r_new, idx_new, aux_new, pen_new, terms_new, closest_new = self.local_step(
                 pred_new, potential)
             # Step check: keep a previous auxiliary variable where it is cheaper under the
             # new H (per feature: a segment keeps both auxiliary endpoints or neither).
             diff = pred_new - aux
-            sq = np.bincount(self.row_feature, weights=np.einsum('ij,ij->i', diff, diff),
-                             minlength=self.n_features)
+            sq = np.einsum('ij,ij->i', diff, diff)
+            if self.n_lines:
+                sq = np.bincount(self.row_feature, weights=sq, minlength=self.n_features)
             old_terms = self.feature_weight * (0.5 * sq + penalty)
             keep_old = old_terms < terms_new
             if np.any(keep_old):

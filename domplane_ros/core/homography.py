@@ -19,6 +19,8 @@ import numpy as np
 # Points whose projective depth falls below this are "at infinity": they are placed far away
 # (finite) so that a closest-point search treats them as unmatched.
 _MIN_W = 1e-9
+# The smallest projective depth a mapped point may have (public name of _MIN_W).
+MIN_DEPTH = _MIN_W
 _FAR_PX = 1e9
 # Public names for code that maps many points at once as apply_homography does.
 MIN_W = _MIN_W
@@ -364,23 +366,28 @@ def _normal_equations(m: np.ndarray, px: np.ndarray, py: np.ndarray, dst_n: np.n
     rx = px - dst_n[:, 0]
     ry = py - dst_n[:, 1]
     # The Jacobian of the x residual is [m, 0, -px m] and of the y residual
-    # [0, m, -py m], with m = (x, y, 1) / w: assemble J^T J and J^T r from 3x3 blocks.
+    # [0, m, -py m], with m = (x, y, 1) / w: assemble J^T J and J^T r from 3x3 blocks, all
+    # from one product of the weighted m with [m, px m, py m, (px^2 + py^2) m, rx, ry, ...].
     mw = m if weights is None else m * weights[:, None]
-    a = mw.T @ m
-    b = mw.T @ (m * px[:, None])
-    c = mw.T @ (m * py[:, None])
-    d = mw.T @ (m * (px * px + py * py)[:, None])
-    normal = np.empty((9, 9))
+    cols = np.empty((m.shape[0], 15))
+    cols[:, 0:3] = m
+    cols[:, 3:6] = m * px[:, None]
+    cols[:, 6:9] = m * py[:, None]
+    cols[:, 9:12] = m * (px * px + py * py)[:, None]
+    cols[:, 12] = rx
+    cols[:, 13] = ry
+    cols[:, 14] = px * rx + py * ry
+    prod = mw.T @ cols
+    a, b, c, d = prod[:, 0:3], prod[:, 3:6], prod[:, 6:9], prod[:, 9:12]
+    normal = np.zeros((9, 9))
     normal[0:3, 0:3] = a
     normal[3:6, 3:6] = a
-    normal[0:3, 3:6] = 0.0
-    normal[3:6, 0:3] = 0.0
     normal[0:3, 6:9] = -b
     normal[6:9, 0:3] = -b.T
     normal[3:6, 6:9] = -c
     normal[6:9, 3:6] = -c.T
     normal[6:9, 6:9] = d
-    grad = np.concatenate([mw.T @ rx, mw.T @ ry, -(mw.T @ (px * rx + py * ry))])
+    grad = np.concatenate([prod[:, 12], prod[:, 13], -prod[:, 14]])
     return normal, grad
 
 
@@ -421,76 +428,53 @@ class NormalisedRefiner:
 
     def energy(self, g: np.ndarray, dst_n: np.ndarray, weights: np.ndarray | None) -> float:
         """Return the transfer energy in pixels^2 for normalised ``g`` and destinations."""
+        return self._evaluate(g, dst_n, weights)[0]
+
+    def _evaluate(self, g: np.ndarray, dst_n: np.ndarray, weights: np.ndarray | None
+                  ) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
+        """Return the transfer energy of ``g`` and its ``(1 / w, px, py)`` (None: inf)."""
         uvw = self.src_h @ g.T
-        w = uvw[:, 2]
-        if np.any(np.abs(w) < _MIN_W):
-            return float('inf')
-        rx = uvw[:, 0] / w - dst_n[:, 0]
-        ry = uvw[:, 1] / w - dst_n[:, 1]
+        iw = uvw[:, 2]
+        if np.min(np.abs(iw)) < _MIN_W:
+            return float('inf'), None
+        iw = 1.0 / iw
+        px = uvw[:, 0] * iw
+        py = uvw[:, 1] * iw
+        rx = px - dst_n[:, 0]
+        ry = py - dst_n[:, 1]
         sq = rx * rx + ry * ry
-        if weights is not None:
-            sq = sq * weights
-        return 0.5 * float(np.sum(sq)) / self.dst_scale ** 2
-
-    def extrapolate(self, previous: np.ndarray, current: np.ndarray, dst: np.ndarray,
-                    factor: float, bound: float, weights: np.ndarray | None = None
-                    ) -> tuple[np.ndarray, float] | None:
-        """Over-relax: move past ``current`` along ``current - previous`` by ``factor``.
-
-        Args:
-            previous: (3, 3) float64 homography before the last update.
-            current: (3, 3) float64 homography after it.
-            dst: (N, 2) float64 destinations of the transfer energy.
-            factor: Extrapolation factor (0 gives ``current``).
-            bound: Largest admissible transfer energy of the result.
-            weights: Optional (N,) non-negative weights of the transfer energy.
-
-        Returns:
-            ``(H, energy)`` when the extrapolated homography's transfer energy is at most
-            ``bound``, else None.
-
-        """
-        g0 = self.to_normalised(previous)
-        g1 = self.to_normalised(current)
-        if float(np.sum(g0 * g1)) < 0:
-            g0 = -g0
-        g = g1 + factor * (g1 - g0)
-        norm = np.linalg.norm(g)
-        if not np.isfinite(norm) or norm == 0:
-            return None
-        g = g / norm
-        e = self.energy(g, _transform(self.t_dst, dst), weights)
-        if e <= bound:
-            return self.from_normalised(g), e
-        return None
+        total = float(sq @ weights) if weights is not None else float(np.sum(sq))
+        return 0.5 * total / self.dst_scale ** 2, (iw, px, py)
 
     def refine(self, matrix: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None,
-               iterations: int = 3) -> tuple[np.ndarray, float, float]:
+               iterations: int = 3, over_relaxation: float = 0.0
+               ) -> tuple[np.ndarray, float, float]:
         """Refine ``matrix`` toward ``dst`` by damped Gauss-Newton steps.
+
+        With ``over_relaxation`` the result is then moved that much further along its
+        update (in the normalised, unit-norm parametrisation), kept if its transfer energy
+        stays at most the energy before the steps.
 
         Args:
             matrix: (3, 3) float64 starting homography (pixels).
             dst: (N, 2) float64 destination points (pixels), paired with the source points.
             weights: Optional (N,) non-negative weights.
             iterations: Number of Gauss-Newton steps.
+            over_relaxation: Extrapolation factor of the update (0: none).
 
         Returns:
             ``(H, energy_before, energy_after)`` with ``energy_after <= energy_before``.
 
         """
         dst_n = _transform(self.t_dst, dst)
-        g = self.to_normalised(matrix)
-        e0 = self.energy(g, dst_n, weights)
+        g = g_start = self.to_normalised(matrix)
+        e0, state = self._evaluate(g, dst_n, weights)
         e = e0
         src_h = self.src_h
         for _ in range(iterations):
-            uvw = src_h @ g.T
-            w = uvw[:, 2]
-            if np.any(np.abs(w) < _MIN_W):
+            if state is None:
                 break
-            iw = 1.0 / w
-            px = uvw[:, 0] * iw
-            py = uvw[:, 1] * iw
+            iw, px, py = state
             normal, grad = _normal_equations(src_h * iw[:, None], px, py, dst_n, weights)
             gvec = g.ravel()
             # J g = 0 (scale gauge); adding g g^T fixes the scale and makes the system regular.
@@ -505,13 +489,23 @@ class NormalisedRefiner:
                 cand = gvec + step
                 cand = (cand / np.linalg.norm(cand)).reshape(3, 3)
                 if np.all(np.isfinite(cand)):
-                    ec = self.energy(cand, dst_n, weights)
+                    ec, cand_state = self._evaluate(cand, dst_n, weights)
                     if ec <= e:
-                        g, e, accepted = cand, ec, True
+                        g, e, state, accepted = cand, ec, cand_state, True
                         break
                 step *= 0.5
             if not accepted:
                 break
+        if over_relaxation > 0.0 and g is not g_start:
+            if float(np.sum(g_start * g)) < 0:
+                g_start = -g_start
+            ext = g + over_relaxation * (g - g_start)
+            norm = np.linalg.norm(ext)
+            if np.isfinite(norm) and norm > 0:
+                ext = ext / norm
+                e_ext = self._evaluate(ext, dst_n, weights)[0]
+                if e_ext <= e0:
+                    g, e = ext, e_ext
         return self.from_normalised(g), e0, e
 
 

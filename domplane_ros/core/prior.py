@@ -184,11 +184,13 @@ _SCREEN_GRID = 320
 def _predict_all(candidates: np.ndarray, left_points: np.ndarray) -> np.ndarray:
     """Return (M, N, 2) predictions of every left point under every candidate."""
     n = left_points.shape[0]
-    homogeneous = np.einsum('mij,nj->mni', candidates,
-                            np.column_stack([left_points, np.ones(n)]))
-    w = homogeneous[..., 2:]
+    homogeneous = candidates @ np.column_stack([left_points, np.ones(n)]).T  # (M, 3, N)
+    w = homogeneous[:, 2]
     w = np.where(np.abs(w) < MIN_W, MIN_W, w)  # as apply_homography: far, finite
-    return np.clip(homogeneous[..., :2] / w, -FAR_PX, FAR_PX)
+    out = np.empty((candidates.shape[0], n, 2))
+    np.divide(homogeneous[:, 0], w, out=out[..., 0])
+    np.divide(homogeneous[:, 1], w, out=out[..., 1])
+    return np.clip(out, -FAR_PX, FAR_PX, out=out)
 
 
 def _exact_energy(pred: np.ndarray, right_tree: cKDTree, threshold_px: float) -> np.ndarray:
@@ -222,13 +224,16 @@ def coarse_screening(pred: np.ndarray, right_points: np.ndarray, threshold_px: f
     idx = np.rint((right_points - low) / cell).astype(int)
     occupied[idx[:, 1], idx[:, 0]] = 0
     dist = cell * cv2.distanceTransform(occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-    grid = np.rint((pred - low) / cell)
-    inside = ((grid[..., 0] >= 0) & (grid[..., 0] < cols)
-              & (grid[..., 1] >= 0) & (grid[..., 1] < rows))
-    d = np.full(pred.shape[:2], threshold_px, np.float64)
-    gi = grid[inside].astype(int)
-    d[inside] = np.minimum(dist[gi[:, 1], gi[:, 0]], threshold_px)
-    return np.sum(d * d, axis=1)
+    # Squared truncated distances, with a border of t all round: a prediction outside the
+    # grid is at least t from every right point, so its index is clipped onto the border.
+    table = np.full((rows + 2, cols + 2), threshold_px ** 2)
+    table[1:-1, 1:-1] = np.minimum(dist, threshold_px) ** 2
+    grid = (pred - (low - cell)) / cell
+    np.rint(grid, out=grid)
+    np.clip(grid, 0, (cols + 1, rows + 1), out=grid)
+    index = grid.astype(np.intp)
+    flat = index[..., 1] * (cols + 2) + index[..., 0]
+    return np.sum(table.ravel()[flat], axis=1)
 
 
 class PriorSearch:
