@@ -55,22 +55,22 @@ _WINDOW_PX = 7
 
 
 def block_parallax(left: np.ndarray, warped: np.ndarray) -> np.ndarray | None:
-    """Return the left-right consistent parallax of the block matcher, same-size pixels.
+    """Return the left-right consistent parallax of the block matcher, in 1/16 pixels.
 
     Args:
         left: (h, w) uint8 left image (here: at half the mask's working size).
         warped: (h, w) uint8 right image warped into the left view.
 
     Returns:
-        (h, w) float32 parallax (positive: nearer than the plane), negative where the matcher
-        found none; None when the images are too small for it.
+        (h, w) int16 parallax times 16 (positive: nearer than the plane), negative where the
+        matcher found none; None when the images are too small for it.
 
     """
     if min(left.shape) < 2 * _BLOCK_PX or left.shape[1] <= _DISPARITIES + _BLOCK_PX:
         return None
     matcher = cv2.StereoBM_create(numDisparities=_DISPARITIES, blockSize=_BLOCK_PX)
     matcher.setDisp12MaxDiff(_LEFT_RIGHT_PX)
-    return matcher.compute(left, warped).astype(np.float32) * np.float32(1.0 / 16.0)
+    return matcher.compute(left, warped)
 
 
 def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
@@ -86,9 +86,8 @@ def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
         obstacle: (h, w) bool pixels labelled obstacle.
 
     Returns:
-        (h, w) bool, a subset of ``obstacle``: in the shadow of a consistent obstacle pixel to
-        the right, not within :data:`_SURFACE_GAP_PX` right of a consistent obstacle pixel,
-        and not matching the warped image at the parallax of the next one to the right.
+        (h, w) bool, a subset of ``obstacle``: in the shadow of an occluder to the right and
+        not part of an obstacle by the tests of the module docstring.
 
     """
     height, width = obstacle.shape
@@ -116,52 +115,71 @@ def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
     return shadow
 
 
+def _gather(values: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+    """Return ``values[rows, columns]`` of a C-contiguous 2-D array (flat indexing)."""
+    return values.ravel()[rows * values.shape[1] + columns]
+
+
 def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
-                    parallax: np.ndarray) -> np.ndarray:
-    """Return the shadow at the matcher's size (see :func:`occlusion_shadow`)."""
+                    parallax16: np.ndarray) -> np.ndarray:
+    """Return the shadow at the matcher's size (see :func:`occlusion_shadow`).
+
+    ``parallax16`` is the matcher's int16 output (1/16 pixels, negative where none).
+    """
     height, width = obstacle.shape
-    occluder = obstacle & (parallax >= np.float32(0.5 * _MIN_OCCLUDER_PX))
-    if not occluder.any():
+    occluder = obstacle & (parallax16 >= np.int16(8 * _MIN_OCCLUDER_PX))
+    rows, cols = np.nonzero(occluder)
+    if rows.size == 0:
         return np.zeros((height, width), bool)
-    columns = np.arange(width, dtype=np.float32)[None, :]
-    index = np.arange(width, dtype=np.int32)[None, :]
-    # An occluder cannot hide floor that the matcher sees (parallax below one half pixel)
-    # between its right-image position and itself: more than one such pixel and it is a
-    # false match (they occur in the hidden floor itself).
-    seen = np.cumsum((parallax >= 0) & (parallax < np.float32(1.0)), axis=1, dtype=np.int32)
-    start = np.clip(index - np.ceil(parallax).astype(np.int32), 0, width - 1)
-    occluder &= seen - np.take_along_axis(seen, start, axis=1) <= 1
-    # Leftmost right-image position of an occluder strictly to the right of each pixel.
-    position = np.where(occluder, columns - parallax, np.float32(np.inf))
+    # An occluder cannot hide floor that the matcher sees (parallax below one pixel) between
+    # its right-image position and itself: more than one such pixel and it is a false match
+    # (they occur in the hidden floor itself).
+    seen = np.cumsum((parallax16 >= 0) & (parallax16 < 16), axis=1, dtype=np.int32)
+    reach_px = (_gather(parallax16, rows, cols).astype(np.int32) + 15) // 16
+    start = np.maximum(cols - reach_px, 0)
+    false = _gather(seen, rows, cols) - _gather(seen, rows, start) > 1
+    occluder[rows[false], cols[false]] = False
+    # Leftmost right-image position of an occluder strictly to the right of each pixel, and
+    # the nearest occluder on the right with its parallax (index * 1024 + parallax16).
+    columns = np.arange(width, dtype=np.int32)[None, :]
+    position = np.where(occluder, 16 * columns - parallax16, np.int32(1 << 30))
     reach = np.minimum.accumulate(position[:, :0:-1], axis=1)[:, ::-1]
     shadow = np.zeros((height, width), bool)
-    shadow[:, :-1] = reach <= columns[:, :-1] + np.float32(0.5 * _SLACK_PX)
+    shadow[:, :-1] = reach <= 16 * columns[:, :-1] + 8 * _SLACK_PX
     shadow &= obstacle & ~occluder
     # The matcher's first consistent pixel lies a pixel or so inside an occluding edge: the
     # pixel just left of an occluder is its edge, not hidden floor.
     shadow[:, :-1] &= ~occluder[:, 1:]
-    if not shadow.any():
-        return shadow
-    # Not inside an obstacle: no consistent obstacle pixel just to the left.
+    # Not inside an obstacle: no occluder within the gap on the left.
     gap = _SURFACE_GAP_PX // 2
-    last_left = np.maximum.accumulate(np.where(occluder, index, np.int32(-width - gap)),
-                                      axis=1)
-    shadow &= index - last_left > gap
+    near_left = cv2.dilate(occluder.view(np.uint8), np.ones((1, gap + 1), np.uint8),
+                           anchor=(gap, 0))
+    shadow &= near_left == 0
+    rows, cols = np.nonzero(shadow)
+    if rows.size == 0:
+        return shadow
     # Not the occluder's own surface: the window does not match at its parallax.
-    next_right = np.minimum.accumulate(
-        np.where(occluder, index, np.int32(width))[:, ::-1], axis=1)[:, ::-1]
-    padded = np.concatenate([parallax, np.full((height, 1), -1.0, np.float32)], axis=1)
-    shift = np.take_along_axis(padded, next_right, axis=1)
-    shadow &= shift >= np.float32(0.5 * _MIN_OCCLUDER_PX)  # an occluder in its own row
-    map_x = columns - np.where(shadow, shift, np.float32(0.0))
+    key = np.where(occluder, columns * 1024 + parallax16, np.int32(1 << 30))
+    next_right = np.minimum.accumulate(key[:, ::-1], axis=1)[:, ::-1]
+    nearest = _gather(next_right, rows, cols)
+    found = nearest < (1 << 30)  # an occluder on the right in its own row
+    shift = (nearest % 1024).astype(np.float32) * np.float32(1.0 / 16.0)
+    map_x = np.tile(np.arange(width, dtype=np.float32), (height, 1))
+    map_x[rows, cols] -= np.where(found, shift, np.float32(0.0))
     map_y = np.repeat(np.arange(height, dtype=np.float32)[:, None], width, axis=1)
     shifted = cv2.remap(warped, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
-    shadow &= _ncc(left, shifted) < _SAME_SURFACE_NCC
+    top, bottom = max(0, int(rows.min()) - _WINDOW_PX), int(rows.max()) + _WINDOW_PX + 1
+    ncc = _ncc(left[top:bottom], shifted[top:bottom])
+    differs = found & (_gather(ncc, rows - top, cols) < _SAME_SURFACE_NCC)
+    shadow[rows[~differs], cols[~differs]] = False
+    rows, cols = rows[differs], cols[differs]
     # Hidden floor continues the floor on its left: at most _LEAD_PX other obstacle pixels
     # (a window's reach into it) between it and the last pixel that is not an obstacle.
     other = np.cumsum(obstacle & ~shadow, axis=1, dtype=np.int32)
-    floor_left = np.maximum.accumulate(np.where(obstacle, np.int32(0), index), axis=1)
-    shadow &= other - np.take_along_axis(other, floor_left, axis=1) <= _LEAD_PX // 2
+    floor_left = np.maximum.accumulate(np.where(obstacle, np.int32(0), columns), axis=1)
+    lead = _gather(other, rows, cols) - _gather(other, rows, _gather(floor_left, rows, cols))
+    far = lead > _LEAD_PX // 2
+    shadow[rows[far], cols[far]] = False
     return shadow
 
 

@@ -75,9 +75,21 @@ def test_no_obstacle_and_small_images_give_no_shadow():
 
 def test_block_parallax_measures_the_face():
     left, warped = _box_scene(1, 16)
-    half = occlusion.block_parallax(cv2.pyrDown(left), cv2.pyrDown(warped))
+    half = occlusion.block_parallax(cv2.pyrDown(left), cv2.pyrDown(warped)) / 16.0
     face = half[TOP // 2 + 4:BOTTOM // 2 - 4, LEFT_EDGE // 2 + 4:RIGHT_EDGE // 2 - 4]
     found = face[face >= 0]
     # 8 half-size pixels; the left-right check leaves most of the face.
     assert found.size > 0.5 * face.size
     assert abs(np.median(found) - 8.0) < 0.5
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_random_input_gives_a_subset_of_the_obstacles(seed):
+    rng = np.random.default_rng(seed)
+    height, width = (int(v) for v in rng.integers(40, 200, 2)) if seed else (81, 160)
+    left = rng.integers(0, 256, (height, width), dtype=np.uint8)
+    warped = rng.integers(0, 256, (height, width), dtype=np.uint8)
+    obstacle = rng.random((height, width)) < rng.uniform(0.05, 0.9)
+    shadow = occlusion.occlusion_shadow(left, warped, obstacle)
+    assert shadow.shape == (height, width) and shadow.dtype == bool
+    assert not np.any(shadow & ~obstacle)
