@@ -20,8 +20,7 @@ the parallax of the next occluder on its right (the same face), or when it does 
 the floor on its left (the constants below say by how much).
 
 Measured on the 30 tuning scenes (``tools/evaluate_mask.py``, docs/MASK.md): hidden floor
-marked unknown 9 % -> 45 % (median), obstacle recall 0.914 -> 0.907, obstacle precision
-0.896 -> 0.919.
+marked unknown 9 % -> 32 % (median) at the same obstacle recall (0.914).
 """
 
 from __future__ import annotations
@@ -29,8 +28,9 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-# Everything below runs at half the mask's working size ("half pixels"); the distances are
-# given in working pixels and halved there.
+# The block matcher and the shadow's geometry run at half the mask's working size ("half
+# pixels"), the tests of the candidates at the working size; distances are given in working
+# pixels (halved where needed).
 # Block matcher: disparities 0 .. _DISPARITIES - 1 half pixels, square block of _BLOCK_PX half
 # pixels, left-right check within _LEFT_RIGHT_PX half pixels.
 _DISPARITIES = 32
@@ -43,15 +43,19 @@ _MIN_OCCLUDER_PX = 2.0
 # at an occluding edge is low by about that).
 _SLACK_PX = 4.0
 # A shadow pixel is part of an obstacle, not hidden floor, when it lies within
-# _SURFACE_GAP_PX working pixels right of an occluder, when its _WINDOW_PX window (half
-# pixels; 5 matched independent smooth textures at 0.7 by chance) matches the warped image at
-# the parallax of the next occluder on its right with a correlation of at least
-# _SAME_SURFACE_NCC, or when more than _LEAD_PX obstacle pixels outside the shadow lie between
-# it and the last non-obstacle pixel on its left (hidden floor continues the floor).
+# _SURFACE_GAP_PX working pixels right of an occluder; when its _WINDOW_PX window matches the
+# warped image at the parallax of the next occluder on its right with a correlation of at
+# least _SAME_SURFACE_NCC (at half size a 5-pixel window matched independent smooth textures
+# at 0.7 by chance); when more than _LEAD_PX obstacle pixels outside the shadow lie between
+# it and the last non-obstacle pixel on its left (hidden floor continues the floor); or when
+# it is one of the last _EDGE_TRIM_PX pixels before the occluding edge. The settings were
+# chosen on the tuning scenes: _EDGE_TRIM_PX is the smallest trim that keeps their obstacle
+# recall at that of the mask without the shadow (docs/MASK.md).
 _SURFACE_GAP_PX = 8
 _SAME_SURFACE_NCC = 0.7
 _LEAD_PX = 8
 _WINDOW_PX = 7
+_EDGE_TRIM_PX = 4
 
 
 def block_parallax(left: np.ndarray, warped: np.ndarray) -> np.ndarray | None:
@@ -107,11 +111,14 @@ def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
         return shadow
     half_obstacle = cv2.resize(obstacle[band].view(np.uint8), half_left.shape[::-1],
                                interpolation=cv2.INTER_NEAREST).view(bool)
-    half = _shadow_in_band(half_left, half_warped, half_obstacle, parallax)
-    if half.any():
-        full = cv2.resize(half.view(np.uint8), (width, bottom - top),
-                          interpolation=cv2.INTER_NEAREST).view(bool)
-        shadow[band] = full & obstacle[band]
+    half_shadow, half_shift = _shadow_candidates(half_obstacle, parallax)
+    if not half_shadow.any():
+        return shadow
+    size = (width, bottom - top)
+    candidates = cv2.resize(half_shadow.view(np.uint8), size,
+                            interpolation=cv2.INTER_NEAREST).view(bool) & obstacle[band]
+    shift = cv2.resize(half_shift, size, interpolation=cv2.INTER_NEAREST) * np.float32(2.0)
+    shadow[band] = _hidden_floor(left[band], warped[band], obstacle[band], candidates, shift)
     return shadow
 
 
@@ -120,17 +127,26 @@ def _gather(values: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> np.nda
     return values.ravel()[rows * values.shape[1] + columns]
 
 
-def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
-                    parallax16: np.ndarray) -> np.ndarray:
-    """Return the shadow at the matcher's size (see :func:`occlusion_shadow`).
+def _shadow_candidates(obstacle: np.ndarray, parallax16: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the shadow's candidates at the matcher's size and their occluder's parallax.
 
-    ``parallax16`` is the matcher's int16 output (1/16 pixels, negative where none).
+    Args:
+        obstacle: (h, w) bool obstacle pixels at the matcher's size.
+        parallax16: (h, w) int16 matcher output (1/16 pixels, negative where none).
+
+    Returns:
+        (h, w) bool obstacle pixels in an occluder's shadow (see the module docstring: slack,
+        edge and gap), and (h, w) float32 the parallax of the next occluder on the right of
+        each candidate, pixels (0 elsewhere).
+
     """
     height, width = obstacle.shape
+    none = np.zeros((height, width), bool), np.zeros((height, width), np.float32)
     occluder = obstacle & (parallax16 >= np.int16(8 * _MIN_OCCLUDER_PX))
     rows, cols = np.nonzero(occluder)
     if rows.size == 0:
-        return np.zeros((height, width), bool)
+        return none
     # An occluder cannot hide floor that the matcher sees (parallax below one pixel) between
     # its right-image position and itself: more than one such pixel and it is a false match
     # (they occur in the hidden floor itself).
@@ -139,8 +155,7 @@ def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
     start = np.maximum(cols - reach_px, 0)
     false = _gather(seen, rows, cols) - _gather(seen, rows, start) > 1
     occluder[rows[false], cols[false]] = False
-    # Leftmost right-image position of an occluder strictly to the right of each pixel, and
-    # the nearest occluder on the right with its parallax (index * 1024 + parallax16).
+    # Leftmost right-image position of an occluder strictly to the right of each pixel.
     columns = np.arange(width, dtype=np.int32)[None, :]
     position = np.where(occluder, 16 * columns - parallax16, np.int32(1 << 30))
     reach = np.minimum.accumulate(position[:, :0:-1], axis=1)[:, ::-1]
@@ -157,30 +172,47 @@ def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
     shadow &= near_left == 0
     rows, cols = np.nonzero(shadow)
     if rows.size == 0:
-        return shadow
-    # Not the occluder's own surface: the window does not match at its parallax.
+        return none
+    # The nearest occluder on the right with its parallax: index * 1024 + parallax16.
     key = np.where(occluder, columns * 1024 + parallax16, np.int32(1 << 30))
-    next_right = np.minimum.accumulate(key[:, ::-1], axis=1)[:, ::-1]
-    nearest = _gather(next_right, rows, cols)
+    nearest = _gather(np.minimum.accumulate(key[:, ::-1], axis=1)[:, ::-1], rows, cols)
     found = nearest < (1 << 30)  # an occluder on the right in its own row
-    shift = (nearest % 1024).astype(np.float32) * np.float32(1.0 / 16.0)
-    map_x = np.tile(np.arange(width, dtype=np.float32), (height, 1))
-    map_x[rows, cols] -= np.where(found, shift, np.float32(0.0))
+    shadow[rows[~found], cols[~found]] = False
+    shift = none[1]
+    shift[rows[found], cols[found]] = (nearest[found] % 1024).astype(np.float32) / 16.0
+    return shadow, shift
+
+
+def _hidden_floor(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
+                  candidates: np.ndarray, shift: np.ndarray) -> np.ndarray:
+    """Return the candidates that are hidden floor (working scale).
+
+    A candidate is not the occluder's own surface when its window does not match the warped
+    image at the occluder's parallax, and it continues the floor on its left: at most
+    :data:`_LEAD_PX` other obstacle pixels (a window's reach into it) between it and the last
+    pixel that is not an obstacle.
+    """
+    height, width = obstacle.shape
+    shadow = candidates.copy()
+    rows, cols = np.nonzero(shadow)
+    map_x = np.tile(np.arange(width, dtype=np.float32), (height, 1)) - shift
     map_y = np.repeat(np.arange(height, dtype=np.float32)[:, None], width, axis=1)
     shifted = cv2.remap(warped, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
     top, bottom = max(0, int(rows.min()) - _WINDOW_PX), int(rows.max()) + _WINDOW_PX + 1
     ncc = _ncc(left[top:bottom], shifted[top:bottom])
-    differs = found & (_gather(ncc, rows - top, cols) < _SAME_SURFACE_NCC)
-    shadow[rows[~differs], cols[~differs]] = False
-    rows, cols = rows[differs], cols[differs]
-    # Hidden floor continues the floor on its left: at most _LEAD_PX other obstacle pixels
-    # (a window's reach into it) between it and the last pixel that is not an obstacle.
+    same = _gather(ncc, rows - top, cols) >= _SAME_SURFACE_NCC
+    shadow[rows[same], cols[same]] = False
+    rows, cols = rows[~same], cols[~same]
+    columns = np.arange(width, dtype=np.int32)[None, :]
     other = np.cumsum(obstacle & ~shadow, axis=1, dtype=np.int32)
     floor_left = np.maximum.accumulate(np.where(obstacle, np.int32(0), columns), axis=1)
     lead = _gather(other, rows, cols) - _gather(other, rows, _gather(floor_left, rows, cols))
-    far = lead > _LEAD_PX // 2
+    far = lead > _LEAD_PX
     shadow[rows[far], cols[far]] = False
-    return shadow
+    # The last few pixels before the occluding edge are as often the edge's own (a window
+    # reaching over it matches nowhere) as hidden floor: they stay obstacles.
+    return cv2.erode(shadow.view(np.uint8), np.ones((1, _EDGE_TRIM_PX + 1), np.uint8),
+                     anchor=(0, 0), borderType=cv2.BORDER_REPLICATE).view(bool) & shadow
 
 
 def _ncc(a_image: np.ndarray, b_image: np.ndarray) -> np.ndarray:

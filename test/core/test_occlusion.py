@@ -35,8 +35,8 @@ def _box_scene(seed: int, parallax: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 @pytest.mark.parametrize('seed', [0, 1])
-@pytest.mark.parametrize('parallax', [8, 16, 24])
-def test_shadow_is_the_floor_the_face_hides(seed, parallax):
+@pytest.mark.parametrize('parallax, found', [(8, 0.25), (16, 0.45), (24, 0.55)])
+def test_shadow_is_the_floor_the_face_hides(seed, parallax, found):
     left, warped = _box_scene(seed, parallax)
     # The zero-shift test marks the face and the floor it hides (both mismatch).
     obstacle = np.zeros((HEIGHT, WIDTH), bool)
@@ -47,10 +47,11 @@ def test_shadow_is_the_floor_the_face_hides(seed, parallax):
     hidden = np.zeros_like(obstacle)
     hidden[TOP:BOTTOM, LEFT_EDGE - parallax:LEFT_EDGE] = True
     face = shadow[TOP:BOTTOM, LEFT_EDGE:RIGHT_EDGE]
-    # Measured on seeds 0-3: 0.70-0.88 of the hidden floor found; at most 2.2 % of the face
-    # in the shadow, all but 0.2 % of it within 4 px of its edge (the matcher's half size).
-    assert shadow[hidden].mean() > 0.65, shadow[hidden].mean()
-    assert face.mean() < 0.03 and face[:, 4:].mean() < 0.005, face.mean()
+    # Measured on seeds 0-3: 0.31-0.39, 0.54-0.68 and 0.64-0.70 of the hidden floor found
+    # for a parallax of 8, 16 and 24 px (the 4 px next to the face are left to it); at most
+    # 0.2 % of the face in the shadow (2.2 % before that trim).
+    assert shadow[hidden].mean() > found, shadow[hidden].mean()
+    assert face.mean() < 0.005 and face[:, 4:].mean() < 0.002, face.mean()
 
 
 def test_a_face_with_no_floor_beside_it_casts_no_shadow_on_itself():
