@@ -20,7 +20,7 @@ the parallax of the next occluder on its right (the same face), or when it does 
 the floor on its left (the constants below say by how much).
 
 Measured on the 30 tuning scenes (``tools/evaluate_mask.py``, docs/MASK.md): hidden floor
-marked unknown 9 % -> 32 % (median) at the same obstacle recall (0.914).
+marked unknown 9 % -> 31 % (median) at the same obstacle recall (0.914).
 """
 
 from __future__ import annotations
@@ -28,9 +28,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-# The block matcher and the shadow's geometry run at half the mask's working size ("half
-# pixels"), the tests of the candidates at the working size; distances are given in working
-# pixels (halved where needed).
+# Everything below runs at half the mask's working size ("half pixels"); the distances are
+# given in working pixels and halved there.
 # Block matcher: disparities 0 .. _DISPARITIES - 1 half pixels, square block of _BLOCK_PX half
 # pixels, left-right check within _LEFT_RIGHT_PX half pixels.
 _DISPARITIES = 32
@@ -43,13 +42,14 @@ _MIN_OCCLUDER_PX = 2.0
 # at an occluding edge is low by about that).
 _SLACK_PX = 4.0
 # A shadow pixel is part of an obstacle, not hidden floor, when it lies within
-# _SURFACE_GAP_PX working pixels right of an occluder; when its _WINDOW_PX window matches the
+# _SURFACE_GAP_PX working pixels right of an occluder; when its _WINDOW_PX window (half
+# pixels; a 5-pixel window matched independent smooth textures at 0.7 by chance) matches the
 # warped image at the parallax of the next occluder on its right with a correlation of at
-# least _SAME_SURFACE_NCC (at half size a 5-pixel window matched independent smooth textures
-# at 0.7 by chance); when more than _LEAD_PX obstacle pixels outside the shadow lie between
-# it and the last non-obstacle pixel on its left (hidden floor continues the floor); or when
-# it is one of the last _EDGE_TRIM_PX pixels before the occluding edge. The settings were
-# chosen on the tuning scenes: _EDGE_TRIM_PX is the smallest trim that keeps their obstacle
+# least _SAME_SURFACE_NCC; when more than _LEAD_PX obstacle pixels outside the shadow lie
+# between it and the last non-obstacle pixel on its left (hidden floor continues the floor);
+# or when it is one of the last _EDGE_TRIM_PX pixels before the occluding edge (a window
+# reaching over the edge matches nowhere, on the edge as on the floor). The settings were
+# chosen on the tuning scenes; _EDGE_TRIM_PX is the smallest trim that keeps their obstacle
 # recall at that of the mask without the shadow (docs/MASK.md).
 _SURFACE_GAP_PX = 8
 _SAME_SURFACE_NCC = 0.7
@@ -111,14 +111,11 @@ def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
         return shadow
     half_obstacle = cv2.resize(obstacle[band].view(np.uint8), half_left.shape[::-1],
                                interpolation=cv2.INTER_NEAREST).view(bool)
-    half_shadow, half_shift = _shadow_candidates(half_obstacle, parallax)
-    if not half_shadow.any():
-        return shadow
-    size = (width, bottom - top)
-    candidates = cv2.resize(half_shadow.view(np.uint8), size,
-                            interpolation=cv2.INTER_NEAREST).view(bool) & obstacle[band]
-    shift = cv2.resize(half_shift, size, interpolation=cv2.INTER_NEAREST) * np.float32(2.0)
-    shadow[band] = _hidden_floor(left[band], warped[band], obstacle[band], candidates, shift)
+    half = _shadow_in_band(half_left, half_warped, half_obstacle, parallax)
+    if half.any():
+        full = cv2.resize(half.view(np.uint8), (width, bottom - top),
+                          interpolation=cv2.INTER_NEAREST).view(bool)
+        shadow[band] = full & obstacle[band]
     return shadow
 
 
@@ -127,26 +124,17 @@ def _gather(values: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> np.nda
     return values.ravel()[rows * values.shape[1] + columns]
 
 
-def _shadow_candidates(obstacle: np.ndarray, parallax16: np.ndarray
-                       ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the shadow's candidates at the matcher's size and their occluder's parallax.
+def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
+                    parallax16: np.ndarray) -> np.ndarray:
+    """Return the shadow at the matcher's size (see :func:`occlusion_shadow`).
 
-    Args:
-        obstacle: (h, w) bool obstacle pixels at the matcher's size.
-        parallax16: (h, w) int16 matcher output (1/16 pixels, negative where none).
-
-    Returns:
-        (h, w) bool obstacle pixels in an occluder's shadow (see the module docstring: slack,
-        edge and gap), and (h, w) float32 the parallax of the next occluder on the right of
-        each candidate, pixels (0 elsewhere).
-
+    ``parallax16`` is the matcher's int16 output (1/16 pixels, negative where none).
     """
     height, width = obstacle.shape
-    none = np.zeros((height, width), bool), np.zeros((height, width), np.float32)
     occluder = obstacle & (parallax16 >= np.int16(8 * _MIN_OCCLUDER_PX))
     rows, cols = np.nonzero(occluder)
     if rows.size == 0:
-        return none
+        return np.zeros((height, width), bool)
     # An occluder cannot hide floor that the matcher sees (parallax below one pixel) between
     # its right-image position and itself: more than one such pixel and it is a false match
     # (they occur in the hidden floor itself).
@@ -155,7 +143,8 @@ def _shadow_candidates(obstacle: np.ndarray, parallax16: np.ndarray
     start = np.maximum(cols - reach_px, 0)
     false = _gather(seen, rows, cols) - _gather(seen, rows, start) > 1
     occluder[rows[false], cols[false]] = False
-    # Leftmost right-image position of an occluder strictly to the right of each pixel.
+    # Leftmost right-image position of an occluder strictly to the right of each pixel, and
+    # the nearest occluder on the right with its parallax (index * 1024 + parallax16).
     columns = np.arange(width, dtype=np.int32)[None, :]
     position = np.where(occluder, 16 * columns - parallax16, np.int32(1 << 30))
     reach = np.minimum.accumulate(position[:, :0:-1], axis=1)[:, ::-1]
@@ -172,47 +161,39 @@ def _shadow_candidates(obstacle: np.ndarray, parallax16: np.ndarray
     shadow &= near_left == 0
     rows, cols = np.nonzero(shadow)
     if rows.size == 0:
-        return none
-    # The nearest occluder on the right with its parallax: index * 1024 + parallax16.
+        return shadow
+    # Not the occluder's own surface: the window does not match at its parallax.
     key = np.where(occluder, columns * 1024 + parallax16, np.int32(1 << 30))
-    nearest = _gather(np.minimum.accumulate(key[:, ::-1], axis=1)[:, ::-1], rows, cols)
+    next_right = np.minimum.accumulate(key[:, ::-1], axis=1)[:, ::-1]
+    nearest = _gather(next_right, rows, cols)
     found = nearest < (1 << 30)  # an occluder on the right in its own row
-    shadow[rows[~found], cols[~found]] = False
-    shift = none[1]
-    shift[rows[found], cols[found]] = (nearest[found] % 1024).astype(np.float32) / 16.0
-    return shadow, shift
-
-
-def _hidden_floor(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
-                  candidates: np.ndarray, shift: np.ndarray) -> np.ndarray:
-    """Return the candidates that are hidden floor (working scale).
-
-    A candidate is not the occluder's own surface when its window does not match the warped
-    image at the occluder's parallax, and it continues the floor on its left: at most
-    :data:`_LEAD_PX` other obstacle pixels (a window's reach into it) between it and the last
-    pixel that is not an obstacle.
-    """
-    height, width = obstacle.shape
-    shadow = candidates.copy()
-    rows, cols = np.nonzero(shadow)
-    map_x = np.tile(np.arange(width, dtype=np.float32), (height, 1)) - shift
-    map_y = np.repeat(np.arange(height, dtype=np.float32)[:, None], width, axis=1)
-    shifted = cv2.remap(warped, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    shift = (nearest % 1024).astype(np.float32) * np.float32(1.0 / 16.0)
+    # The correlation only over the candidates' bounding box and a window around it.
     top, bottom = max(0, int(rows.min()) - _WINDOW_PX), int(rows.max()) + _WINDOW_PX + 1
-    ncc = _ncc(left[top:bottom], shifted[top:bottom])
-    same = _gather(ncc, rows - top, cols) >= _SAME_SURFACE_NCC
-    shadow[rows[same], cols[same]] = False
-    rows, cols = rows[~same], cols[~same]
-    columns = np.arange(width, dtype=np.int32)[None, :]
+    first, last = max(0, int(cols.min()) - _WINDOW_PX), int(cols.max()) + _WINDOW_PX + 1
+    box = (slice(top, bottom), slice(first, last))
+    map_x = np.tile(np.arange(first, min(last, width), dtype=np.float32),
+                    (left[box].shape[0], 1))
+    map_x[rows - top, cols - first] -= np.where(found, shift, np.float32(0.0))
+    map_y = np.repeat(np.arange(top, top + map_x.shape[0], dtype=np.float32)[:, None],
+                      map_x.shape[1], axis=1)
+    shifted = cv2.remap(warped, map_x, map_y, cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+    ncc = _ncc(left[box], shifted)
+    differs = found & (_gather(ncc, rows - top, cols - first) < _SAME_SURFACE_NCC)
+    shadow[rows[~differs], cols[~differs]] = False
+    rows, cols = rows[differs], cols[differs]
+    # Hidden floor continues the floor on its left: at most _LEAD_PX other obstacle pixels
+    # (a window's reach into it) between it and the last pixel that is not an obstacle.
     other = np.cumsum(obstacle & ~shadow, axis=1, dtype=np.int32)
     floor_left = np.maximum.accumulate(np.where(obstacle, np.int32(0), columns), axis=1)
     lead = _gather(other, rows, cols) - _gather(other, rows, _gather(floor_left, rows, cols))
-    far = lead > _LEAD_PX
+    far = lead > _LEAD_PX // 2
     shadow[rows[far], cols[far]] = False
-    # The last few pixels before the occluding edge are as often the edge's own (a window
-    # reaching over it matches nowhere) as hidden floor: they stay obstacles.
-    return cv2.erode(shadow.view(np.uint8), np.ones((1, _EDGE_TRIM_PX + 1), np.uint8),
-                     anchor=(0, 0), borderType=cv2.BORDER_REPLICATE).view(bool) & shadow
+    # The last pixels before the occluding edge stay obstacles.
+    trim = _EDGE_TRIM_PX // 2
+    shadow &= cv2.erode(shadow.view(np.uint8), np.ones((1, trim + 1), np.uint8),
+                        anchor=(0, 0), borderType=cv2.BORDER_REPLICATE).view(bool)
+    return shadow
 
 
 def _ncc(a_image: np.ndarray, b_image: np.ndarray) -> np.ndarray:

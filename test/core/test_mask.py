@@ -118,9 +118,9 @@ def test_coarse_flow_is_not_dragged_by_tall_objects(frames):
 def test_floor_hidden_from_the_right_camera_is_unknown(frames, monkeypatch):
     # The renderer knows which floor the right camera cannot see behind a box. The occlusion
     # shadow turns it from obstacle into unknown; without it the zero-shift test calls it an
-    # obstacle. Measured on these 8 scenes, pooled: unknown 0.322 with the shadow, 0.090
-    # without; obstacle 0.665, 0.897. Box pixels the right camera sees marked obstacle:
-    # median 0.915 with, 0.917 without; obstacle precision median 0.909 with, 0.899 without.
+    # obstacle. Measured on these 8 scenes, pooled: unknown 0.324 with the shadow, 0.090
+    # without; obstacle 0.663, 0.897. Box pixels the right camera sees marked obstacle:
+    # median 0.914 with, 0.917 without; obstacle precision median 0.909 with, 0.899 without.
     def figures():
         hidden = [0, 0, 0]
         seen, precision = [], []
