@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 import math
 import time
 
-from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.config import EstimatorConfig, PlaneNodeConfig
 from domplane_ros.core.estimator import can_widen, GRADUATED, TwoStep
 from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.homography import as_homography
@@ -44,6 +44,13 @@ SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidate
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
 _WIDE_BASIN_FACTOR = 4.0
+# The search's and the challenge's candidates stop iterating once a round moves every
+# prediction by less than this (pixels); the winner is then iterated to
+# ``estimator.tolerance_px`` and verified again. Measured: 37 % fewer rounds on 12 rendered
+# cold starts; evaluate_trust on the tuning seeds published as many correct planes (one more
+# cold start, one rough rig fewer) and no wrong one. At 0.2 px: 63 % fewer rounds, but three
+# fewer correct planes (a cut never re-locked).
+CANDIDATE_TOLERANCE_PX = 0.1
 
 
 @dataclass
@@ -411,7 +418,7 @@ class PlanePipeline:
             self._challenge.add_prior_starts(search.candidates[i] for i in
                                              search.ranked()[:PRIOR_STARTS])
         else:
-            result = problem.estimate(task.start, self.config.estimator, widen=False)
+            result = problem.estimate(task.start, self._candidate_options, widen=False)
             if result.ok and not self._checks.rejection_reason(
                     result, feats, size, bounds=task.kind == PRIOR_START):
                 best, verdict, _ = self._trust.pick(step.left, step.right, [result],
@@ -419,11 +426,42 @@ class PlanePipeline:
                 if best is not None and verdict is not None and self._trust.beats(verdict, lock):
                     step.warm_start = 'challenger'
                     self._trust.reset()
-                    self._verified(step, best, verdict)
+                    self._verified(step, *self._finished(step, problem, feats, size, best,
+                                                         verdict))
                     self._challenge = None
                     return
         if self._challenge.done:
             self._challenge = None
+
+    @property
+    def _candidate_options(self) -> EstimatorConfig:
+        """Return the estimator settings of the search's and the challenge's candidates.
+
+        They stop at :data:`CANDIDATE_TOLERANCE_PX` (the slow tail of the iteration, tens of
+        rounds that move the plane by hundredths of a pixel, is left to the winner:
+        :meth:`_finished`).
+        """
+        options = self.config.estimator
+        if options.tolerance_px >= CANDIDATE_TOLERANCE_PX:
+            return options
+        return replace(options, tolerance_px=CANDIDATE_TOLERANCE_PX)
+
+    def _finished(self, step: PairStep, problem: TwoStep, feats: Features,
+                  size: tuple[int, int], best: PlaneEstimate, verdict: Verdict
+                  ) -> tuple[PlaneEstimate, Verdict]:
+        """Iterate the winning candidate to the configured tolerance and verify it again.
+
+        Returns the finished plane and its verdict, or the candidate and its own verdict
+        where the finished plane is refused (both are verified).
+        """
+        final = problem.estimate(best.homography, self.config.estimator, widen=False)
+        if not final.ok or self._checks.rejection_reason(final, feats, size, bounds=False):
+            return best, verdict
+        again = self._trust.judge(step.left, step.right, final.homography,
+                                  self.config.features.roi)
+        if not again.accepted:
+            return best, verdict
+        return replace(final, candidates_tried=best.candidates_tried), again
 
     def _coarse_estimates(self, step: PairStep, problem: TwoStep, feats: Features,
                           size: tuple[int, int]) -> list[PlaneEstimate]:
@@ -435,7 +473,7 @@ class PlanePipeline:
         out = []
         for start in distinct_starts(self._trust.coarse_candidates(step.left, step.right),
                                      size):
-            result = problem.estimate(start, self.config.estimator, widen=False)
+            result = problem.estimate(start, self._candidate_options, widen=False)
             if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)
         return out
@@ -447,7 +485,7 @@ class PlanePipeline:
         rejection = ''
         for index in indices:
             result, rejected = prior_search.refine(
-                [index], self.config.estimator,
+                [index], self._candidate_options,
                 lambda estimate: self._checks.rejection_reason(estimate, feats, size))
             rejection = rejected or rejection
             if result is not None and result.ok:
@@ -523,7 +561,7 @@ class PlanePipeline:
         if best is not None and verdict is not None:
             if best is step.initial:
                 step.warm_start = 'initial'
-            self._verified(step, best, verdict)
+            self._verified(step, *self._finished(step, problem, feats, size, best, verdict))
             return
         if len(search.tried) < limit:
             step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
@@ -547,7 +585,7 @@ class PlanePipeline:
             budget -= 1
             step.candidates += 1
             init = as_homography(cfg.initial_homography, 'initial_homography')
-            first = problem.estimate(init, cfg.estimator, widen=False)
+            first = problem.estimate(init, self._candidate_options, widen=False)
             if first.ok and not self._checks.rejection_reason(first, feats, size):
                 pool.append(first)
                 step.initial = first

@@ -14,6 +14,7 @@ from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import cut_sequence, plane_error_px, RigError, rough_rig, swapped
+from domplane_ros.stream import pipeline as pipeline_module
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import LOCKED, PlanePipeline
 from domplane_ros.stream.trust import TrustGate
@@ -206,3 +207,24 @@ def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
     refined = [sum(corner_distance_px(s, c, width, height) < 0.5 for s in starts)
                for c in (near[1], far[0], far[1])]
     assert refined == [0, 1, 0], refined
+
+
+def test_search_candidates_stop_early_and_the_published_winner_is_finished(monkeypatch):
+    tolerances = []
+    estimate = TwoStep.estimate
+
+    def spy(self, init, options, *, widen=None):
+        tolerances.append(options.tolerance_px)
+        return estimate(self, init, options, widen=widen)
+
+    monkeypatch.setattr(TwoStep, 'estimate', spy)
+    frame = random_scene(6, floor='random')
+    result = PlanePipeline().process(frame.left, frame.right, 0)
+    assert result.ok, result.reason
+    assert plane_error_px(frame, result.homography) < 0.5
+    # Every candidate stopped at the candidates' tolerance; the last run, the winner's
+    # finish, at the configured one (and its plane is the one published, verified again).
+    configured = PlaneNodeConfig().estimator.tolerance_px
+    assert len(tolerances) > 2
+    assert set(tolerances[:-1]) == {pipeline_module.CANDIDATE_TOLERANCE_PX}
+    assert tolerances[-1] == configured < pipeline_module.CANDIDATE_TOLERANCE_PX
