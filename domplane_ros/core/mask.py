@@ -41,6 +41,7 @@ import cv2
 from domplane_ros.config import MaskConfig
 from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
+from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
 import numpy as np
 
@@ -224,6 +225,9 @@ def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                                principal_point_px)
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config)
     _clean(labels, valid, decidable, int(config.morph_px))
+    hidden = occlusion_shadow(left_small, warped, labels == OBSTACLE)
+    labels[hidden] = UNKNOWN
+    parallax[hidden] = NOT_MEASURED
     _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid)
     if (small_h, small_w) != (height, width):
         labels = cv2.resize(labels, (width, height), interpolation=cv2.INTER_NEAREST_EXACT)

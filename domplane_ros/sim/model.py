@@ -148,6 +148,12 @@ class StereoFrame:
         boxes: The boxes, in the level frame.
         floor: The floor texture kind.
         head_pose: The head's pose on the floor.
+        occluded_in_right: (H, W) bool, the floor point seen at the left pixel's centre is
+            inside the right image but hidden from the right camera by a box (the occlusion
+            shadow; disjoint from ``visible_in_right``), or None if not rendered.
+        obstacle_hidden: (H, W) bool, box pixels whose point (where the left pixel centre's
+            ray meets a box) the right camera does not see: outside the right image, or
+            behind a box (a face turned away from it); or None if not rendered.
     """
 
     left: np.ndarray
@@ -160,6 +166,8 @@ class StereoFrame:
     boxes: tuple[Box, ...] = ()
     floor: str = 'random'
     head_pose: HeadPose = HeadPose()
+    occluded_in_right: np.ndarray | None = None
+    obstacle_hidden: np.ndarray | None = None
 
 
 def footprint_radius(box: Box) -> float:

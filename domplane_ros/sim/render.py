@@ -326,13 +326,15 @@ def _occluded(boxes: list[_PlacedBox], origin: np.ndarray, target: np.ndarray) -
 
 def _ground_truth(setup: CameraSetup, labels: tuple[np.ndarray, np.ndarray],
                   boxes: list[_PlacedBox], supersample: int
-                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Return the left floor, floor seen by the right camera, obstacle and occluded floor."""
     s = supersample
     h, w = setup.height, setup.width
     left_labels = labels[0].reshape(h, s, w, s)
     plane_left = np.all(left_labels == 1, axis=(1, 3))
     obstacle_left = np.any(left_labels == 2, axis=(1, 3))
     visible = np.zeros((h, w), bool)
+    occluded = np.zeros((h, w), bool)
     ys, xs = np.nonzero(plane_left)
     if ys.size:
         hom = setup.homography()
@@ -349,9 +351,46 @@ def _ground_truth(setup: CameraSetup, labels: tuple[np.ndarray, np.ndarray],
         floor_pts = (rays / rays[1]).T
         right_origin = camera_poses(setup)[1][0]
         clear = ~_occluded(boxes, right_origin, floor_pts)
-        idx = np.flatnonzero(inside)[clear]
-        visible[ys[idx], xs[idx]] = True
-    return plane_left, visible, obstacle_left
+        idx = np.flatnonzero(inside)
+        visible[ys[idx[clear]], xs[idx[clear]]] = True
+        occluded[ys[idx[~clear]], xs[idx[~clear]]] = True
+    return plane_left, visible, obstacle_left, occluded
+
+
+def _obstacle_hidden(setup: CameraSetup, obstacle_left: np.ndarray,
+                     boxes: list[_PlacedBox]) -> np.ndarray:
+    """Return the (H, W) bool box pixels whose point the right camera does not see.
+
+    The point is where the left pixel centre's ray first meets a box; it is not seen when it
+    is outside the right image or a box (its own included: a face turned away) lies between
+    it and the right camera. Box pixels whose centre ray misses every box (edges) are not
+    counted as hidden.
+    """
+    hidden = np.zeros(obstacle_left.shape, bool)
+    ys, xs = np.nonzero(obstacle_left)
+    if ys.size == 0:
+        return hidden
+    (left_origin, r_lc), (right_origin, r_rc) = camera_poses(setup)
+    pts = np.stack([xs, ys, np.ones_like(xs)]).astype(np.float64)
+    rays = r_lc @ (np.linalg.inv(setup.intrinsics()) @ pts)
+    t_hit = np.full(xs.size, np.inf)
+    for box in boxes:
+        t_near, t_far, _, _ = _slab(box, left_origin, rays[0], rays[1], rays[2])
+        hit = (t_near <= t_far) & (t_near > 1e-6)
+        t_hit = np.where(hit & (t_near < t_hit), t_near, t_hit)
+    on_box = np.isfinite(t_hit)
+    # Step back toward the left camera by a millimetre so the point's own face does not count.
+    points = left_origin + (rays[:, on_box] * (t_hit[on_box] * (1.0 - 1e-3))).T
+    cam = (points - right_origin) @ r_rc
+    pix = cam @ setup.intrinsics().T
+    depth = np.where(pix[:, 2] > 1e-9, pix[:, 2], 1.0)
+    rx, ry = pix[:, 0] / depth, pix[:, 1] / depth
+    inside = (pix[:, 2] > 1e-9) & (rx >= 0) & (rx <= setup.width - 1) & (ry >= 0) \
+        & (ry <= setup.height - 1)
+    unseen = ~inside | _occluded(boxes, right_origin, points)
+    idx = np.flatnonzero(on_box)[unseen]
+    hidden[ys[idx], xs[idx]] = True
+    return hidden
 
 
 def _check_render_arguments(floor: str, background: str, gain: float, offset: float,
@@ -439,8 +478,10 @@ def render_stereo(setup: CameraSetup, boxes: Sequence[Box] = (), floor: str = 'r
         labels.append(label)
         images.append(_expose(value, setup, s, blur_sigma, (gain, offset) if index == 1 else None,
                               noise_std, rng))
-    plane_left, visible, obstacle_left = _ground_truth(setup, (labels[0], labels[1]), placed, s)
+    plane_left, visible, obstacle_left, occluded = _ground_truth(
+        setup, (labels[0], labels[1]), placed, s)
     return StereoFrame(left=images[0], right=images[1], homography=setup.homography(),
                        plane_left=plane_left, visible_in_right=visible,
                        obstacle_left=obstacle_left, setup=setup, boxes=tuple(boxes),
-                       floor=floor, head_pose=head_pose)
+                       floor=floor, head_pose=head_pose, occluded_in_right=occluded,
+                       obstacle_hidden=_obstacle_hidden(setup, obstacle_left, placed))

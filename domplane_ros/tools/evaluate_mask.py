@@ -19,7 +19,10 @@ Data, each scored with the plane homography named in the table:
 * **rendered**: :func:`~domplane_ros.sim.random_scene` seeds ``0 .. N-1`` (the tuning set) or,
   with ``--held-out``, ``1000 .. 1000+N-1`` (not looked at while tuning), true homography.
   Plane truth = floor seen by both cameras, obstacle truth = box pixels. Figures per scene,
-  medians over scenes: plane IoU, obstacle recall and precision, true ground marked obstacle.
+  medians over scenes: plane IoU, obstacle recall (also over the box pixels the right camera
+  sees, the renderer's ``obstacle_hidden``) and precision, true ground marked obstacle,
+  and floor hidden from the right camera by a box (the renderer's ``occluded_in_right``)
+  marked unknown and marked obstacle (over the scenes that have such floor).
 * **KITTI 2015 000046**: road = ground-truth disparity pixels within 1 px of the robust road
   plane, off-road = pixels more than 1 px off it (the issue's labels); scored with the
   reference homography (from that plane) and with the homography our pipeline estimates (the
@@ -53,7 +56,7 @@ from typing import Callable, Sequence
 import cv2
 from domplane_ros.config import FeatureConfig, MaskConfig, PlaneNodeConfig
 from domplane_ros.core.mask import (DEFAULT_FOCAL_PX, mask_scores, OBSTACLE, overlay,
-                                    parallax_mask, ParallaxMask, PLANE)
+                                    parallax_mask, ParallaxMask, PLANE, UNKNOWN)
 from domplane_ros.sim.generators import indoor_scene, random_scene
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.stream.frame import debug_overlay
@@ -137,6 +140,14 @@ def rendered_scores(frame: StereoFrame, labels: np.ndarray) -> dict[str, float]:
     scores = mask_scores(labels, ground, frame.obstacle_left)
     scores['ground_as_obstacle'] = float(np.mean(labels[ground] == OBSTACLE)) \
         if ground.any() else math.nan
+    seen = frame.obstacle_left & ~frame.obstacle_hidden if frame.obstacle_hidden is not None \
+        else frame.obstacle_left
+    scores['seen_obstacle_recall'] = float(np.mean(labels[seen] == OBSTACLE)) \
+        if seen.any() else math.nan
+    hidden = frame.occluded_in_right
+    for key, value in (('occluded_unknown', UNKNOWN), ('occluded_obstacle', OBSTACLE)):
+        scores[key] = float(np.mean(labels[hidden] == value)) \
+            if hidden is not None and hidden.any() else math.nan
     return scores
 
 
@@ -313,9 +324,12 @@ def summary(rendered: dict, indoor: dict, kitti: dict, times: dict[str, float],
     rows = []
     for key, label in (('plane_iou', 'plane IoU (median)'),
                        ('obstacle_recall', 'obstacle recall (median)'),
+                       ('seen_obstacle_recall', 'obstacle recall, box seen by both (median)'),
                        ('obstacle_precision', 'obstacle precision (median)'),
                        ('ground_as_obstacle', 'true ground marked obstacle (median)'),
-                       ('plane_precision', 'plane precision (median)')):
+                       ('plane_precision', 'plane precision (median)'),
+                       ('occluded_unknown', 'occluded floor marked unknown (median)'),
+                       ('occluded_obstacle', 'occluded floor marked obstacle (median)')):
         target = TARGETS.get(key)
         rows.append([f'rendered, {seeds}, {len(rendered["ncc"])} scenes', label,
                      '-' if target is None else fmt(target)]

@@ -86,9 +86,36 @@ def test_ground_truth_masks_are_consistent():
     outside = (rx < 0) | (rx > SETUP.width - 1) | (ry < 0) | (ry > SETUP.height - 1)
     assert outside.any()
     assert not frame.visible_in_right[ys[outside], xs[outside]].any()
-    # Some floor pixels inside the right image are hidden behind a box from the right camera.
+    # Some floor pixels inside the right image are hidden behind a box from the right camera:
+    # exactly the occlusion label, which is floor, not visible, and never outside the image.
     hidden = frame.plane_left & ~frame.visible_in_right
     assert np.count_nonzero(hidden[ys[~outside], xs[~outside]]) > 20
+    occluded = frame.occluded_in_right
+    assert occluded.dtype == bool and occluded.shape == frame.left.shape
+    assert not np.any(occluded & frame.visible_in_right)
+    assert not np.any(occluded & ~frame.plane_left)
+    assert not occluded[ys[outside], xs[outside]].any()
+    assert np.array_equal(occluded[ys[~outside], xs[~outside]], hidden[ys[~outside], xs[~outside]])
+    # The right camera is to the right: hidden floor lies left of a box in its row.
+    rows, columns = np.nonzero(occluded)
+    box_right = [frame.obstacle_left[row, column + 1:].any() for row, column in zip(rows, columns)]
+    assert np.mean(box_right) > 0.99
+
+
+def test_box_faces_turned_away_from_the_right_camera_are_hidden():
+    setup = CameraSetup(400.0, 0.4, 20.0, 0.0, 320, 240)
+    # The box's left face (x = 0.2) lies between the cameras (x = 0 and 0.4): the left camera
+    # sees it, the right one does not. A box right of both cameras shows them the same faces.
+    between = render_stereo(setup, (Box(0.45, 3.0, 0.5, 0.5, 0.6),), noise_std=0.0)
+    beside = render_stereo(setup, (Box(1.2, 3.0, 0.5, 0.5, 0.6),), noise_std=0.0)
+    for frame in (between, beside):
+        assert not np.any(frame.obstacle_hidden & ~frame.obstacle_left)
+    assert not beside.obstacle_hidden.any() and beside.obstacle_left.sum() > 2000
+    rows, columns = np.nonzero(between.obstacle_hidden)
+    assert rows.size > 200
+    # The hidden face is the left one: left of the middle of the box in its row.
+    middle = [np.median(np.nonzero(between.obstacle_left[row])[0]) for row in rows]
+    assert np.mean(columns < np.array(middle)) > 0.95
 
 
 def test_occluded_floor_does_not_match():

@@ -59,7 +59,9 @@ def test_tool_writes_the_sheet_and_the_table(tmp_path):
     assert rc == 0
     text = (out / 'mask_summary.txt').read_text(encoding='utf-8')
     for row in ('plane IoU (median)', 'road marked plane', 'walls + furniture marked plane',
-                'mask time, median ms (CPU time)', 'baseline (--baseline)'):
+                'mask time, median ms (CPU time)', 'baseline (--baseline)',
+                'occluded floor marked unknown (median)',
+                'obstacle recall, box seen by both (median)'):
         assert row in text
     road = next(line for line in text.splitlines()
                 if 'reference H' in line and 'road marked plane' in line).split('|')
