@@ -453,8 +453,9 @@ class PlanePipeline:
                   ) -> tuple[PlaneEstimate, Verdict]:
         """Iterate the winning candidate to the configured tolerance and verify it again.
 
-        Returns the finished plane and its verdict, or the candidate and its own verdict
-        where the finished plane is refused (both are verified).
+        Returns the finished plane and its verdict (with the candidate's uniqueness among
+        the planes judged beside it), or the candidate and its own verdict where the finished
+        plane is refused (both are verified).
         """
         final = problem.estimate(best.homography, self.config.estimator, widen=False)
         if not final.ok or self._checks.rejection_reason(final, feats, size, bounds=False):
@@ -463,7 +464,8 @@ class PlanePipeline:
                                   self.config.features.roi)
         if not again.accepted:
             return best, verdict
-        return replace(final, candidates_tried=best.candidates_tried), again
+        return (replace(final, candidates_tried=best.candidates_tried),
+                replace(again, uniqueness=verdict.uniqueness))
 
     def _coarse_estimates(self, step: PairStep, problem: TwoStep, feats: Features,
                           size: tuple[int, int]) -> list[PlaneEstimate]:
@@ -604,7 +606,9 @@ class PlanePipeline:
         pool += refined
         pool += self._coarse_estimates(step, problem, feats, size)
         if search.rivals is None:
-            # Once per search the swap is tested, not assumed absent (stream/swap.py).
+            # Once per search the swap is tested, not assumed absent (stream/swap.py). The
+            # rivals are iterated to the configured tolerance, not the candidates': a rival
+            # left short of its best would make the winner look more unique than it is.
             search.rivals = swap_rivals(
                 problem, candidates, limit, cfg.estimator, cfg.prior.screen_threshold_px,
                 lambda estimate: self._checks.rejection_reason(estimate, feats, size,
