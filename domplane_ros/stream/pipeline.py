@@ -45,7 +45,7 @@ SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidate
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
 _WIDE_BASIN_FACTOR = 4.0
-# The search's and the challenge's candidates stop iterating once a round moves every
+# The prior's candidates (search and challenge) stop iterating once a round moves every
 # prediction by less than this (pixels); the winner is then iterated to
 # ``estimator.tolerance_px`` and verified again. Measured: 37 % fewer rounds on 12 rendered
 # cold starts; evaluate_trust on the tuning seeds published as many correct planes (one more
@@ -420,7 +420,9 @@ class PlanePipeline:
             self._challenge.add_prior_starts(search.candidates[i] for i in
                                              search.ranked()[:PRIOR_STARTS])
         else:
-            result = problem.estimate(task.start, self._candidate_options, widen=False)
+            options = (self._candidate_options if task.kind == PRIOR_START
+                       else self.config.estimator)
+            result = problem.estimate(task.start, options, widen=False)
             if result.ok and not self._checks.rejection_reason(
                     result, feats, size, bounds=task.kind == PRIOR_START):
                 best, verdict, _ = self._trust.pick(step.left, step.right, [result],
@@ -437,11 +439,15 @@ class PlanePipeline:
 
     @property
     def _candidate_options(self) -> EstimatorConfig:
-        """Return the estimator settings of the search's and the challenge's candidates.
+        """Return the estimator settings of the prior's candidates (search and challenge).
 
         They stop at :data:`CANDIDATE_TOLERANCE_PX` (the slow tail of the iteration, tens of
         rounds that move the plane by hundredths of a pixel, is left to the winner:
-        :meth:`_finished`).
+        :meth:`_finished`). The coarse alignment's few starts, the configured initial
+        homography and the swapped cameras' rivals keep the configured tolerance: they are
+        the search's only route to rigs outside the prior's model, and a coarse start on a
+        periodic floor can need the tail to gather its inliers (measured: the look-alike
+        that names a swap on a tiled floor, tuning seed 68).
         """
         options = self.config.estimator
         if options.tolerance_px >= CANDIDATE_TOLERANCE_PX:
@@ -453,8 +459,9 @@ class PlanePipeline:
                   ) -> tuple[PlaneEstimate, Verdict]:
         """Iterate the winning candidate to the configured tolerance and verify it again.
 
-        Returns the finished plane and its verdict, or the candidate and its own verdict
-        where the finished plane is refused (both are verified).
+        Returns the finished plane and its verdict (with the candidate's uniqueness among
+        the planes judged beside it), or the candidate and its own verdict where the finished
+        plane is refused (both are verified).
         """
         final = problem.estimate(best.homography, self.config.estimator, widen=False)
         if not final.ok or self._checks.rejection_reason(final, feats, size, bounds=False):
@@ -463,7 +470,8 @@ class PlanePipeline:
                                   self.config.features.roi)
         if not again.accepted:
             return best, verdict
-        return replace(final, candidates_tried=best.candidates_tried), again
+        return (replace(final, candidates_tried=best.candidates_tried),
+                replace(again, uniqueness=verdict.uniqueness))
 
     def _coarse_estimates(self, step: PairStep, problem: TwoStep, feats: Features,
                           size: tuple[int, int]) -> list[PlaneEstimate]:
@@ -475,7 +483,7 @@ class PlanePipeline:
         out = []
         for start in distinct_starts(self._trust.coarse_candidates(step.left, step.right),
                                      size):
-            result = problem.estimate(start, self._candidate_options, widen=False)
+            result = problem.estimate(start, self.config.estimator, widen=False)
             if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)
         return out
@@ -587,7 +595,7 @@ class PlanePipeline:
             budget -= 1
             step.candidates += 1
             init = as_homography(cfg.initial_homography, 'initial_homography')
-            first = problem.estimate(init, self._candidate_options, widen=False)
+            first = problem.estimate(init, self.config.estimator, widen=False)
             if first.ok and not self._checks.rejection_reason(first, feats, size):
                 pool.append(first)
                 step.initial = first
@@ -604,7 +612,9 @@ class PlanePipeline:
         pool += refined
         pool += self._coarse_estimates(step, problem, feats, size)
         if search.rivals is None:
-            # Once per search the swap is tested, not assumed absent (stream/swap.py).
+            # Once per search the swap is tested, not assumed absent (stream/swap.py). The
+            # rivals are iterated to the configured tolerance, not the candidates': a rival
+            # left short of its best would make the winner look more unique than it is.
             search.rivals = swap_rivals(
                 problem, candidates, limit, cfg.estimator, cfg.prior.screen_threshold_px,
                 lambda estimate: self._checks.rejection_reason(estimate, feats, size,
