@@ -189,7 +189,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'unconstrained and fail the frame (0 disables).', 0.0, 1.0),
     ParamSpec('pipeline.max_clipped_fraction', 0.6, 'float',
               'A frame with more than this fraction of black (grey <= 2) or saturated '
-              '(grey >= 253) pixels is refused (1 disables).', 0.01, 1.0),
+              '(grey >= 253) pixels is refused (1 disables; images over 0.5 MP are counted '
+              'on a regular grid of about 0.5 MP).', 0.01, 1.0),
     ParamSpec('pipeline.max_stamp_jump_s', 10.0, 'float',
               'A pair stamped more than this many seconds after the last one drops the warm '
               'start (as a stamp going backwards does).', 0.001, 1e6),

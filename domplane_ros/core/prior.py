@@ -132,6 +132,25 @@ def prior_candidates(prior: PriorConfig, width: int, height: int) -> np.ndarray:
     return _candidate_grid(prior, int(width), int(height)).copy()
 
 
+def swapped_candidates(candidates: np.ndarray) -> np.ndarray:
+    """Return the candidates' planes seen by the same heads with left and right exchanged.
+
+    A head whose image topics are swapped maps the floor from its given left image to its
+    given right one by ``H^-1``: the inverse of a candidate of the prior's camera model. These
+    hypotheses let a search test the swap explicitly rather than hope a look-alike of the
+    correctly ordered model scores lower than the plane it did not look for.
+
+    Args:
+        candidates: (M, 3, 3) float64 homographies (:func:`prior_candidates`).
+
+    Returns:
+        (M, 3, 3) float64 inverses, ``H[2, 2] == 1``.
+
+    """
+    inverse = np.linalg.inv(candidates)
+    return inverse / inverse[:, 2:3, 2:3]
+
+
 @functools.lru_cache(maxsize=16)
 def _candidate_grid(prior: PriorConfig, width: int, height: int) -> np.ndarray:
     out = [plane_homography(f, bh, tilt, verg, width, height, prior.principal_point_px)

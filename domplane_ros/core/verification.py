@@ -58,6 +58,9 @@ import numpy as np
 # Probe directions in working pixels (the plane moved in the right image).
 PROBES = ((1.0, 0.0), (-1.0, 0.0), (0.0, 1.0), (0.0, -1.0))
 
+# The lowest share of the region's rows over which PlaneVerification.bottom_score is measured.
+BOTTOM_BAND = 1.0 / 3.0
+
 # Failure reasons, in the order they are checked.
 REASON_NO_OVERLAP = 'plane maps too little of the left image inside the right image'
 REASON_NO_TEXTURE = 'too few textured pixels to verify'
@@ -135,6 +138,10 @@ class PlaneVerification:
         textured_fraction: Share of the region pixels that are textured, [0, 1].
         reason: Empty when accepted, else why not.
         time_ms: Wall time of the call in milliseconds.
+        bottom_score: The score over the lowest :data:`BOTTOM_BAND` of the region only (its
+            supporting share of the textured pixels there; 0 if none is textured), [0, 1].
+            The ground seen from above fills the bottom of the image, so its plane explains
+            part of it; a plane through boxes or a wall above the floor explains none.
     """
 
     accepted: bool
@@ -145,6 +152,7 @@ class PlaneVerification:
     textured_fraction: float
     reason: str
     time_ms: float
+    bottom_score: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -319,10 +327,19 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     hom = as_valid_homography(homography)
     region = _check_roi(roi)
     maps = _maps(left, right, hom, config, region)
-    return _verdict(maps, config, start)
+    return _verdict(maps, config, start, region)
 
 
-def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float) -> PlaneVerification:
+def _bottom_score(maps: AgreementMaps, region: tuple[float, float, float, float]) -> float:
+    """Return the supporting share of the textured pixels in the region's lowest rows."""
+    height = maps.textured.shape[0]
+    top = int(round((region[3] - BOTTOM_BAND * (region[3] - region[1])) * height))
+    textured = int(np.count_nonzero(maps.textured[top:]))
+    return int(np.count_nonzero(maps.support[top:])) / textured if textured else 0.0
+
+
+def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
+             region: tuple[float, float, float, float]) -> PlaneVerification:
     region_px = max(1, int(np.count_nonzero(maps.textured | ~maps.textured)))
     n_textured = int(np.count_nonzero(maps.textured))
     textured_fraction = n_textured / region_px
@@ -348,7 +365,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float) -> P
         accepted=not reason, score=float(score), confidence=confidence,
         support_fraction=float(support), overlap_fraction=float(overlap),
         textured_fraction=float(textured_fraction), reason=reason,
-        time_ms=1000.0 * (time.perf_counter() - start))
+        time_ms=1000.0 * (time.perf_counter() - start), bottom_score=_bottom_score(maps, region))
 
 
 def swap_evidence(homography: np.ndarray, width: int, height: int,

@@ -34,6 +34,8 @@ import numpy as np
 
 # Grey levels at or beyond these count as clipped (black or saturated).
 _DARK, _BRIGHT = 2, 253
+# Images larger than this many pixels are checked on a regular grid of about this many.
+_SAMPLED_PIXELS = 500_000
 # Stamps kept per side to find each message's closest partner.
 _SKEW_WINDOW = 8
 
@@ -196,15 +198,27 @@ class PairChecks:
     def _frozen_reason(self, previous: tuple[np.ndarray, np.ndarray] | None,
                        left: np.ndarray, right: np.ndarray) -> str:
         """Return why one camera is frozen while the other changed ('' if it is not)."""
-        same = previous is not None and [
-            previous[i].shape == image.shape and np.array_equal(previous[i], image)
-            for i, image in enumerate((left, right))]
+        same = previous is not None and [_identical(previous[i], image)
+                                         for i, image in enumerate((left, right))]
         if not same or same[0] == same[1]:
             return ''
         self.counts.add('frozen_camera')
         frozen, moving = ('left', 'right') if same[0] else ('right', 'left')
         return (f'{frozen} camera frozen: its image is identical to its previous '
                 f'one while the {moving} image changed')
+
+
+def _identical(a: np.ndarray, b: np.ndarray) -> bool:
+    """Return whether two images are identical, comparing a sparse grid of pixels first.
+
+    Successive frames of a live camera differ almost everywhere (noise), so the grid settles
+    it without reading the whole image (an 8 MB comparison at 3840 x 2160).
+    """
+    if a.shape != b.shape:
+        return False
+    if a.size > _SAMPLED_PIXELS and not np.array_equal(a[::8, ::8], b[::8, ::8]):
+        return False
+    return bool(np.array_equal(a, b))
 
 
 def clipped_reason(gray: np.ndarray, side: str, max_fraction: float) -> str:
@@ -222,6 +236,12 @@ def clipped_reason(gray: np.ndarray, side: str, max_fraction: float) -> str:
     """
     if max_fraction >= 1.0:
         return ''
+    # Above _SAMPLED_PIXELS the fractions are counted on a regular grid of about that many
+    # pixels (every k-th row and column): 4x cheaper at 3840 x 2160, and a fraction of
+    # half a million samples is within a fraction of a percent of the whole image's.
+    stride = max(1, int(np.sqrt(gray.size / _SAMPLED_PIXELS)))
+    if stride > 1:
+        gray = gray[::stride, ::stride]
     total = float(gray.size)
     dark = np.count_nonzero(gray <= _DARK) / total
     bright = np.count_nonzero(gray >= _BRIGHT) / total

@@ -30,6 +30,7 @@ from domplane_ros.stream.detection import carried_features, detect_features, ful
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import FrameTracker
+from domplane_ros.stream.swap import swap_rivals
 from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
 
@@ -74,6 +75,7 @@ class _Search:
     tried: set[int] = field(default_factory=set)
     best: np.ndarray | None = None
     initial_tried: bool = False
+    rivals: list[np.ndarray] | None = None  # planes of swapped cameras (stream/swap.py)
 
 
 class PlanePipeline:
@@ -451,8 +453,9 @@ class PlanePipeline:
                   ) -> tuple[PlaneEstimate, Verdict]:
         """Iterate the winning candidate to the configured tolerance and verify it again.
 
-        Returns the finished plane and its verdict, or the candidate and its own verdict
-        where the finished plane is refused (both are verified).
+        Returns the finished plane and its verdict (with the candidate's uniqueness among
+        the planes judged beside it), or the candidate and its own verdict where the finished
+        plane is refused (both are verified).
         """
         final = problem.estimate(best.homography, self.config.estimator, widen=False)
         if not final.ok or self._checks.rejection_reason(final, feats, size, bounds=False):
@@ -461,7 +464,8 @@ class PlanePipeline:
                                   self.config.features.roi)
         if not again.accepted:
             return best, verdict
-        return replace(final, candidates_tried=best.candidates_tried), again
+        return (replace(final, candidates_tried=best.candidates_tried),
+                replace(again, uniqueness=verdict.uniqueness))
 
     def _coarse_estimates(self, step: PairStep, problem: TwoStep, feats: Features,
                           size: tuple[int, int]) -> list[PlaneEstimate]:
@@ -556,7 +560,7 @@ class PlanePipeline:
         self.stats.candidates += step.candidates
         step.warm_start = 'search'
         best, verdict, unverified = self._trust.pick(step.left, step.right, pool,
-                                                     self.config.features.roi)
+                                                     self.config.features.roi, search.rivals)
         search.best = best.homography if best is not None else None
         if best is not None and verdict is not None:
             if best is step.initial:
@@ -601,6 +605,16 @@ class PlanePipeline:
         refined, rejection = self._refined(prior_search, chosen, feats, size)
         pool += refined
         pool += self._coarse_estimates(step, problem, feats, size)
+        if search.rivals is None:
+            # Once per search the swap is tested, not assumed absent (stream/swap.py). The
+            # rivals are iterated to the configured tolerance, not the candidates': a rival
+            # left short of its best would make the winner look more unique than it is.
+            search.rivals = swap_rivals(
+                problem, candidates, limit, cfg.estimator, cfg.prior.screen_threshold_px,
+                lambda estimate: self._checks.rejection_reason(estimate, feats, size,
+                                                               bounds=False),
+                lambda start: self._trust.polish(step.left, step.right, start,
+                                                 cfg.features.roi))
         return pool, rejection, limit
 
     def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,

@@ -7,6 +7,14 @@ this plane, and not the same plane moved slightly, explains) and by the geometry
 plane (:func:`~domplane_ros.core.verification.swap_evidence`: its disparity must grow toward
 the image bottom, or left and right are swapped).
 
+A search publishes a plane only if it is *unique*: it must explain clearly more of the image
+(:data:`CHALLENGE_MARGIN` times) than every distinct plane the search found on the same pair,
+the planes of swapped cameras (:data:`SWAP_STARTS`) included. On a periodic floor a
+look-alike one period off and the floor (or, with swapped cameras, the swapped floor) explain
+about the same share; which one is the floor cannot be told from that pair, so none is
+published. The confidence says so too: it is the lesser of the score's confidence and the
+uniqueness's (:meth:`Verdict.confidence`).
+
 While locked, a plane must also keep its score: a score that falls below a fraction of the
 lock's recent median means the view changed under the warm start (a cut, a saccade, a camera
 re-plugged) even if the new score still passes the absolute threshold. Every
@@ -18,7 +26,8 @@ explains clearly more of the image than the lock, the lock is replaced.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+import math
 import statistics
 from typing import Sequence
 
@@ -35,13 +44,22 @@ import numpy as np
 # equals the least baseline over camera height the check admits (the prior's default
 # minimum is 0.05).
 MIN_GROUND_SLOPE = 0.02
-# A published plane must score at least this fraction of every verified plane of swapped
-# cameras on the same pair; else the swapped plane explains the image and the others are its
-# look-alikes (measured: the true plane outscores its look-alikes on 398 of 400 pairs).
-SWAP_DOMINANCE = 1.0
 # A challenger replaces the lock only if its score is this many times the lock's: a plane a
 # fraction of a pixel away scores about the same and must not churn the lock.
 CHALLENGE_MARGIN = 1.2
+# A published plane must explain at least this share of the textured pixels in the lowest
+# third of the region (PlaneVerification.bottom_score): the ground seen from above fills the
+# bottom of the image. Measured on the tuning seeds 30-129 (cold, rough, swapped, faint tiles):
+# the true planes published scored at least 0.16 there (1st percentile), the planes through
+# boxes above a floor that passed the verification 0.0.
+MIN_BOTTOM_SCORE = 0.05
+# Two planes are distinct when they map the bottom of the image (a 5 x 5 grid over the lowest
+# 40 % of the rows, where the ground is) more than this many pixels apart (median); closer
+# ones are the same plane refined differently (starts 1.8-11.8 px apart converge to the same
+# plane, stream/challenge.py NEAR_LOCK_PX). The median, not the largest: two fits of the same
+# floor, 0.6 and 0.8 px from the truth over it, were measured 8-20 px apart where they
+# extrapolate beyond it.
+DISTINCT_PX = 8.0
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -56,17 +74,32 @@ class Verdict:
         verification: The photometric verification (score, confidence, fractions).
         reason: Empty when accepted, else one line saying why not.
         swapped: The plane looks like one of swapped left and right cameras.
+        uniqueness: Its score over the best score of a distinct plane judged on the same pair
+            (:meth:`TrustGate.pick`); inf when there was none.
+        ground: False for a plane refused as no ground plane (a wall, a plane through boxes
+            above the floor): it does not compete with ground planes for uniqueness.
     """
 
     accepted: bool
     verification: PlaneVerification
     reason: str
     swapped: bool = False
+    uniqueness: float = math.inf
+    ground: bool = True
 
     @property
     def confidence(self) -> float:
-        """Return the verification confidence in [0, 1] (0 for a swapped plane)."""
-        return 0.0 if self.swapped else self.verification.confidence
+        """Return the confidence in [0, 1]: 0 for a swapped plane, else the lesser of two.
+
+        The verification's confidence (0.5 at ``verification.min_score``, 1 at 0.1 above
+        it) and the uniqueness's: 0.5 at :data:`CHALLENGE_MARGIN` (the least a search
+        publishes), 0 at a tie with a distinct plane, 1 at twice the margin above 1.
+        """
+        if self.swapped:
+            return 0.0
+        unique = float(np.clip((self.uniqueness - 1.0) / (2.0 * (CHALLENGE_MARGIN - 1.0)),
+                               0.0, 1.0)) if math.isfinite(self.uniqueness) else 1.0
+        return min(self.verification.confidence, unique)
 
     @property
     def score(self) -> float:
@@ -139,11 +172,16 @@ class TrustGate:
         if slope < MIN_GROUND_SLOPE:
             return Verdict(False, check, 'not a ground plane: its disparity does not grow '
                            f'toward the image bottom ({slope:+.3f} px per row < '
-                           f'{MIN_GROUND_SLOPE}); a wall or the far field?')
+                           f'{MIN_GROUND_SLOPE}); a wall or the far field?', ground=False)
         if not check.accepted:
             return Verdict(False, check, f'plane not verified: {check.reason} (score '
                            f'{check.score:.2f} < verification.min_score '
                            f'{self.settings.min_score:g})')
+        if check.bottom_score < MIN_BOTTOM_SCORE:
+            return Verdict(False, check, 'not the ground: the plane explains '
+                           f'{100 * check.bottom_score:.0f} % of the bottom of the image '
+                           f'(< {100 * MIN_BOTTOM_SCORE:.0f} %); a plane through obstacles?',
+                           ground=False)
         lock = self.lock_score
         if locked and lock is not None and check.score < self.settings.drop_ratio * lock:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
@@ -169,40 +207,54 @@ class TrustGate:
         return period > 0 and self._locked_frames > 0 and self._locked_frames % period == 0
 
     def pick(self, left: np.ndarray, right: np.ndarray, estimates: Sequence[PlaneEstimate],
-             roi: Sequence[float] | None = None
+             roi: Sequence[float] | None = None, rivals: Sequence[np.ndarray] | None = None
              ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
-        """Verify every estimate and return the best verified one.
+        """Verify every estimate and return the best verified one, if it is unique.
 
         Candidates are ranked by the verification score, not by the point energy: a plane one
         tile or plank off can have the lower energy, never the higher score (measured on the
-        same pair). Planes within 0.5 px of one already judged are not verified again.
+        same pair). Planes within 0.5 px of one already judged are not verified again. The
+        best is published only if its score is at least :data:`CHALLENGE_MARGIN` times that
+        of every distinct plane judged (verified or not; walls and planes through obstacles do
+        not compete), of every plane of swapped cameras judged (distinct or not) and of every
+        plane of ``rivals``: (3, 3) homographies judged only as rivals, never published (the
+        swapped cameras' planes, :mod:`domplane_ros.stream.swap`).
 
         Returns:
-            The best verified estimate and its verdict (None, None if none verified) and, if
-            none verified, why (the swap reason if any plane looked swapped).
+            The best verified estimate and its verdict (None, None if none verified or it is
+            not unique) and, if none, why (the swap reason if any plane looked swapped).
 
         """
-        best: tuple[PlaneEstimate, Verdict] | None = None
-        reasons: list[Verdict] = []
-        judged: list[np.ndarray] = []
+        judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]] = []
         height, width = left.shape
         corners = np.array([[0, 0, 1], [width - 1, 0, 1], [width - 1, height - 1, 1],
                             [0, height - 1, 1]], np.float64).T
+        mapped_all: list[np.ndarray] = []
         for estimate in estimates:
             mapped = estimate.homography @ corners
             mapped = mapped[:2] / mapped[2]
-            if any(np.max(np.abs(mapped - other)) < 0.5 for other in judged):
+            if any(np.max(np.abs(mapped - other)) < 0.5 for other in mapped_all):
                 continue
-            judged.append(mapped)
-            verdict = self.judge(left, right, estimate.homography, roi)
-            if not verdict.accepted:
-                reasons.append(verdict)
-            elif best is None or verdict.score > best[1].score:
-                best = (estimate, verdict)
+            mapped_all.append(mapped)
+            judged.append((estimate, estimate.homography,
+                           self.judge(left, right, estimate.homography, roi)))
+        verified = [item for item in judged if item[2].accepted]
+        reasons = [verdict for _, _, verdict in judged if not verdict.accepted]
         swapped = [v for v in reasons if v.swapped and v.verification.accepted]
-        top_swap = max((v.score for v in swapped), default=0.0)
-        if best is not None and best[1].score >= SWAP_DOMINANCE * top_swap:
-            return best[0], best[1], ''
+        if verified:
+            judged += [(None, rival, self.judge(left, right, rival, roi))
+                       for rival in rivals or []]
+            best, best_h, verdict = max(verified, key=lambda item: item[2].score)
+            rival_scores = [(v.score, v.swapped) for _, h, v in judged
+                            if _rival(v, h, best_h, width, height)]
+            top, top_swapped = max(rival_scores, default=(0.0, False))
+            verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
+            if verdict.uniqueness >= CHALLENGE_MARGIN:
+                return best, verdict, ''
+            kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
+            return None, None, (f'ambiguous: a {kind} explains the image almost as well '
+                                f'(score {top:.2f} against {verdict.score:.2f} < '
+                                f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
         if swapped:
             # The image is explained better by a plane of swapped cameras: what passes the
             # ground check is a look-alike (measured: a checker floor one period off).
@@ -212,6 +264,58 @@ class TrustGate:
         closest = max(reasons, key=lambda v: v.score)
         return None, None, closest.reason
 
+    def polish(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+               roi: Sequence[float] | None = None) -> np.ndarray:
+        """Return the best-scoring of a plane moved by up to one probe step in the right image.
+
+        A photometric polish for a start the corners cannot refine: the plane and its eight
+        neighbours ``T(d) H`` (``d`` on a grid of half a working pixel of the verification,
+        in full pixels: 2 px at 640 x 480) are verified and the best returned.
+
+        Args:
+            left: (H, W) uint8 left image.
+            right: (H, W) uint8 right image.
+            homography: (3, 3) float64 start homography.
+            roi: Region of the left image (fractions), as ``features.roi``.
+
+        Returns:
+            (3, 3) float64 homography.
+
+        """
+        config = self.config(left.shape[1])
+        step = 0.5 * left.shape[1] / config.working_width_px
+        best, best_score = homography, -1.0
+        for dx in (-step, 0.0, step):
+            for dy in (-step, 0.0, step):
+                moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ homography
+                score = verify_plane(left, right, moved, config, roi).score
+                if score > best_score:
+                    best, best_score = moved / moved[2, 2], score
+        return best
+
     def beats(self, challenger: Verdict, lock: Verdict) -> bool:
         """Return whether a challenger explains clearly more of the image than the lock."""
         return challenger.accepted and challenger.score > CHALLENGE_MARGIN * lock.score
+
+
+def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,
+           height: int) -> bool:
+    """Return whether a judged plane competes with the best for uniqueness.
+
+    A plane of swapped cameras always does (the other hypothesis about the head, however
+    close it maps: measured, a checker's swapped floor 0.6 px from the truth and a look-alike
+    9 px off it, within 8 px of each other at the image bottom); a plane of this head only
+    when distinct; walls and planes through obstacles never.
+    """
+    return verdict.ground and (verdict.swapped or _distinct(homography, best, width, height))
+
+
+def _distinct(first: np.ndarray, second: np.ndarray, width: int, height: int) -> bool:
+    """Return whether two planes map the bottom of the image > DISTINCT_PX apart (median)."""
+    xs, ys = np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(0.6 * (height - 1),
+                                                                   height - 1, 5))
+    points = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)]).T
+    a, b = first @ points, second @ points
+    with np.errstate(divide='ignore', invalid='ignore'):
+        distance = np.median(np.linalg.norm(a[:2] / a[2] - b[:2] / b[2], axis=0))
+    return not distance <= DISTINCT_PX

@@ -17,8 +17,9 @@ from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.image import gray_to_image_fields, message_to_gray
 from domplane_ros.errors import ImageDecodeError
 from domplane_ros.sim.generators import random_scene
-from domplane_ros.stream.health import (inlier_spread, input_diagnostic_values, problem_key,
-                                        StampChecks, Throttle)
+from domplane_ros.stream.health import (_identical, clipped_reason, inlier_spread,
+                                        input_diagnostic_values, problem_key, StampChecks,
+                                        Throttle)
 import domplane_ros.stream.pipeline as pipeline_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import ERROR, OK, plane_status, WARN
@@ -422,3 +423,18 @@ def test_random_pairs_give_a_valid_result_or_a_failure_with_reason(frames):
             assert result.reason == ''
         else:
             assert result.homography is None and result.reason and not result.mask.any()
+
+
+def test_large_frames_are_checked_on_a_grid_with_the_same_answers():
+    # 3840 x 2160: the clipped fractions come from a regular grid, the frozen check compares
+    # a sparse grid first; both must still give the whole image's answer.
+    rng = np.random.default_rng(7)
+    big = rng.integers(20, 230, (2160, 3840), dtype=np.uint8)
+    big[:1400] = 0  # 65 % black
+    assert 'left image is black: 65 %' in clipped_reason(big, 'left', 0.6)
+    assert clipped_reason(big, 'left', 0.7) == ''
+    other = big.copy()
+    other[2001, 3001] ^= 1  # one pixel off the sparse grid differs
+    assert not _identical(big, other)
+    assert _identical(big, big.copy())
+    assert not _identical(big, big[:, :-1])

@@ -1,0 +1,126 @@
+"""A search publishes a plane only if it is unique, the swap tested and the ground at the bottom.
+
+Each test here fails with its mechanism switched off: the wrong planes are the ones found on
+the tuning seeds 30-129 of ``evaluate_trust`` (swapped cameras on periodic floors, a plane
+through boxes), their truth from the renderer. Default configuration and prior throughout.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+import math
+
+from domplane_ros.config import PlaneNodeConfig, VerificationSettings
+from domplane_ros.core.estimator import estimate_plane
+from domplane_ros.core.features import detect_corners
+from domplane_ros.core.verification import verify_plane
+from domplane_ros.sim.generators import random_scene
+from domplane_ros.sim.rigs import plane_error_px, swapped
+from domplane_ros.stream import pipeline as pipeline_module
+from domplane_ros.stream import trust as trust_module
+from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.stream.trust import TrustGate, Verdict
+import numpy as np
+import pytest
+
+
+def _run(frame):
+    return PlanePipeline().process(frame.left, frame.right, 0)
+
+
+@pytest.mark.parametrize('seed', [68, 115])
+def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypatch):
+    # Tiles (68) and a checker of few corners (115: its swapped floor polished, not refined).
+    frame = swapped(random_scene(seed))
+    result = _run(frame)
+    assert not result.ok and not result.mask.any() and result.confidence == 0.0
+    assert 'swapped' in result.reason, result.reason
+    # Without the swap's rivals a look-alike of the correctly ordered model is published.
+    monkeypatch.setattr(pipeline_module, 'swap_rivals', lambda *args, **kwargs: [])
+    without = _run(frame)
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+
+
+def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
+    # Checker (seed 0): the swapped floor maps within 8 px of a look-alike 9 px off it.
+    frame = swapped(random_scene(0))
+    result = _run(frame)
+    assert not result.ok and 'swapped' in result.reason, result.reason
+    monkeypatch.setattr(trust_module, '_rival', lambda verdict, h, best, width, height: (
+        verdict.ground and trust_module._distinct(h, best, width, height)))
+    without = _run(frame)
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+
+
+def test_a_plane_through_boxes_is_not_the_ground(monkeypatch):
+    frame = swapped(random_scene(61))
+    result = _run(frame)
+    assert not result.ok and 'not the ground' in result.reason, result.reason
+    monkeypatch.setattr(trust_module, 'MIN_BOTTOM_SCORE', 0.0)
+    without = _run(frame)
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+
+
+def test_the_true_floor_explains_the_bottom_of_the_image():
+    scene = random_scene(3)
+    true = verify_plane(scene.left, scene.right, scene.homography)
+    assert true.bottom_score > 3 * trust_module.MIN_BOTTOM_SCORE
+    # With a region of interest the band is the region's own lowest rows (here mostly far
+    # floor and boxes, which the plane explains less of).
+    top = verify_plane(scene.left, scene.right, scene.homography, roi=(0.0, 0.0, 1.0, 0.4))
+    assert top.bottom_score < true.bottom_score
+
+
+@pytest.fixture(scope='module')
+def scene():
+    return random_scene(3)
+
+
+def _estimate_at(scene, homography):
+    cfg = PlaneNodeConfig().features
+    estimate = estimate_plane(detect_corners(scene.left, cfg), detect_corners(scene.right, cfg),
+                              init=scene.homography)
+    assert estimate.ok
+    return replace(estimate, homography=homography)
+
+
+def test_a_distinct_plane_scoring_alike_makes_the_best_ambiguous(scene, monkeypatch):
+    gate = TrustGate(VerificationSettings())
+    true = _estimate_at(scene, scene.homography)
+    alone, verdict, reason = gate.pick(scene.left, scene.right, [true])
+    assert alone is true and reason == '' and math.isinf(verdict.uniqueness)
+    # The same plane as a rival is not distinct: still unique.
+    same, _, _ = gate.pick(scene.left, scene.right, [true], rivals=[scene.homography])
+    assert same is true
+    # A distinct plane (moved 30 px) scoring 0.9 of the truth: ambiguous, nothing published.
+    moved = np.array([[1.0, 0.0, 30.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ scene.homography
+    real = trust_module.verify_plane
+
+    def scored(left, right, homography, config, roi=None):
+        check = real(left, right, scene.homography, config, roi)
+        if np.allclose(homography, moved):
+            return replace(check, score=0.9 * check.score)
+        return check
+
+    monkeypatch.setattr(trust_module, 'verify_plane', scored)
+    best, verdict, reason = gate.pick(scene.left, scene.right, [true], rivals=[moved])
+    assert best is None and verdict is None and 'ambiguous' in reason, reason
+    # A rival at 0.7 of the score (1.43 x) leaves the truth unique, confidence above 0.5.
+    monkeypatch.setattr(trust_module, 'verify_plane', lambda left, right, h, config, roi=None: (
+        replace(real(left, right, scene.homography, config, roi),
+                score=0.7 * real(left, right, scene.homography, config, roi).score)
+        if np.allclose(h, moved) else real(left, right, h, config, roi)))
+    best, verdict, reason = gate.pick(scene.left, scene.right, [true], rivals=[moved])
+    assert best is true and verdict.uniqueness == pytest.approx(1 / 0.7)
+    assert 0.5 < verdict.confidence <= verdict.verification.confidence
+
+
+def test_confidence_is_the_lesser_of_score_and_uniqueness(scene):
+    check = TrustGate(VerificationSettings()).judge(scene.left, scene.right, scene.homography)
+    assert check.confidence == check.verification.confidence > 0.5
+    at_margin = replace(check, uniqueness=trust_module.CHALLENGE_MARGIN)
+    assert at_margin.confidence == pytest.approx(0.5)
+    tie = replace(check, uniqueness=1.0)
+    assert tie.confidence == 0.0
+    assert Verdict(True, check.verification, '', uniqueness=5.0).confidence == pytest.approx(
+        check.verification.confidence)
