@@ -124,6 +124,24 @@ def _gather(values: np.ndarray, rows: np.ndarray, columns: np.ndarray) -> np.nda
     return values.ravel()[rows * values.shape[1] + columns]
 
 
+def _occluders(obstacle: np.ndarray, parallax16: np.ndarray) -> np.ndarray:
+    """Return the (h, w) bool occluders: obstacle pixels with a consistent large parallax.
+
+    An occluder cannot hide floor that the matcher sees (parallax below one pixel) between its
+    right-image position and itself: more than one such pixel and it is a false match (they
+    occur in the hidden floor itself).
+    """
+    occluder = obstacle & (parallax16 >= np.int16(8 * _MIN_OCCLUDER_PX))
+    rows, cols = np.nonzero(occluder)
+    if rows.size:
+        seen = np.cumsum((parallax16 >= 0) & (parallax16 < 16), axis=1, dtype=np.int32)
+        reach_px = (_gather(parallax16, rows, cols).astype(np.int32) + 15) // 16
+        start = np.maximum(cols - reach_px, 0)
+        false = _gather(seen, rows, cols) - _gather(seen, rows, start) > 1
+        occluder[rows[false], cols[false]] = False
+    return occluder
+
+
 def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
                     parallax16: np.ndarray) -> np.ndarray:
     """Return the shadow at the matcher's size (see :func:`occlusion_shadow`).
@@ -131,20 +149,8 @@ def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
     ``parallax16`` is the matcher's int16 output (1/16 pixels, negative where none).
     """
     height, width = obstacle.shape
-    occluder = obstacle & (parallax16 >= np.int16(8 * _MIN_OCCLUDER_PX))
-    rows, cols = np.nonzero(occluder)
-    if rows.size == 0:
-        return np.zeros((height, width), bool)
-    # An occluder cannot hide floor that the matcher sees (parallax below one pixel) between
-    # its right-image position and itself: more than one such pixel and it is a false match
-    # (they occur in the hidden floor itself).
-    seen = np.cumsum((parallax16 >= 0) & (parallax16 < 16), axis=1, dtype=np.int32)
-    reach_px = (_gather(parallax16, rows, cols).astype(np.int32) + 15) // 16
-    start = np.maximum(cols - reach_px, 0)
-    false = _gather(seen, rows, cols) - _gather(seen, rows, start) > 1
-    occluder[rows[false], cols[false]] = False
-    # Leftmost right-image position of an occluder strictly to the right of each pixel, and
-    # the nearest occluder on the right with its parallax (index * 1024 + parallax16).
+    occluder = _occluders(obstacle, parallax16)
+    # Leftmost right-image position of an occluder strictly to the right of each pixel.
     columns = np.arange(width, dtype=np.int32)[None, :]
     position = np.where(occluder, 16 * columns - parallax16, np.int32(1 << 30))
     reach = np.minimum.accumulate(position[:, :0:-1], axis=1)[:, ::-1]
@@ -159,12 +165,28 @@ def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
     near_left = cv2.dilate(occluder.view(np.uint8), np.ones((1, gap + 1), np.uint8),
                            anchor=(gap, 0))
     shadow &= near_left == 0
-    rows, cols = np.nonzero(shadow)
-    if rows.size == 0:
+    if not shadow.any():
         return shadow
-    # Not the occluder's own surface: the window does not match at its parallax.
+    # The nearest occluder on the right with its parallax: index * 1024 + parallax16.
     key = np.where(occluder, columns * 1024 + parallax16, np.int32(1 << 30))
-    next_right = np.minimum.accumulate(key[:, ::-1], axis=1)[:, ::-1]
+    _drop_same_surface(left, warped, shadow, np.minimum.accumulate(key[:, ::-1], axis=1)[:, ::-1])
+    _drop_not_floor(obstacle, shadow)
+    # The last pixels before the occluding edge stay obstacles.
+    trim = _EDGE_TRIM_PX // 2
+    shadow &= cv2.erode(shadow.view(np.uint8), np.ones((1, trim + 1), np.uint8),
+                        anchor=(0, 0), borderType=cv2.BORDER_REPLICATE).view(bool)
+    return shadow
+
+
+def _drop_same_surface(left: np.ndarray, warped: np.ndarray, shadow: np.ndarray,
+                       next_right: np.ndarray) -> None:
+    """Drop, in place, shadow pixels that match the warped image at their occluder's parallax.
+
+    ``next_right`` holds, per pixel, ``index * 1024 + parallax16`` of the nearest occluder on
+    its right, ``1 << 30`` where there is none (those pixels are dropped too).
+    """
+    height, width = shadow.shape
+    rows, cols = np.nonzero(shadow)
     nearest = _gather(next_right, rows, cols)
     found = nearest < (1 << 30)  # an occluder on the right in its own row
     shift = (nearest % 1024).astype(np.float32) * np.float32(1.0 / 16.0)
@@ -181,19 +203,21 @@ def _shadow_in_band(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
     ncc = _ncc(left[box], shifted)
     differs = found & (_gather(ncc, rows - top, cols - first) < _SAME_SURFACE_NCC)
     shadow[rows[~differs], cols[~differs]] = False
-    rows, cols = rows[differs], cols[differs]
-    # Hidden floor continues the floor on its left: at most _LEAD_PX other obstacle pixels
-    # (a window's reach into it) between it and the last pixel that is not an obstacle.
+
+
+def _drop_not_floor(obstacle: np.ndarray, shadow: np.ndarray) -> None:
+    """Drop, in place, shadow pixels that do not continue the floor on their left.
+
+    Hidden floor has at most :data:`_LEAD_PX` other obstacle pixels (a window's reach into
+    it) between it and the last pixel on its left that is not an obstacle.
+    """
+    rows, cols = np.nonzero(shadow)
+    columns = np.arange(shadow.shape[1], dtype=np.int32)[None, :]
     other = np.cumsum(obstacle & ~shadow, axis=1, dtype=np.int32)
     floor_left = np.maximum.accumulate(np.where(obstacle, np.int32(0), columns), axis=1)
     lead = _gather(other, rows, cols) - _gather(other, rows, _gather(floor_left, rows, cols))
     far = lead > _LEAD_PX // 2
     shadow[rows[far], cols[far]] = False
-    # The last pixels before the occluding edge stay obstacles.
-    trim = _EDGE_TRIM_PX // 2
-    shadow &= cv2.erode(shadow.view(np.uint8), np.ones((1, trim + 1), np.uint8),
-                        anchor=(0, 0), borderType=cv2.BORDER_REPLICATE).view(bool)
-    return shadow
 
 
 def _ncc(a_image: np.ndarray, b_image: np.ndarray) -> np.ndarray:

@@ -14,7 +14,7 @@ from domplane_ros.sim.generators import random_scene, RENDERED_PRIOR
 from domplane_ros.sim.synthetic import (displace_homography, line_scene, plane_error_px,
                                         point_scene)
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
-from hypothesis import assume, given, HealthCheck, settings, strategies as st
+from hypothesis import assume, example, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
 
@@ -89,7 +89,8 @@ def test_segment_lines_are_unit_signed_distances():
 
 @settings(max_examples=30, deadline=None)
 @given(seed=st.integers(0, 100_000), offset=st.floats(0.0, 2.9))
-def test_tree_search_equals_brute_force_for_near_lines(seed, offset):
+@example(seed=48911, offset=1.0)  # the tree's 8 candidates missed a line 2.9 px away
+def test_closest_line_equals_brute_force_for_near_lines(seed, offset):
     rng = np.random.default_rng(seed)
     scene = line_scene(rng, 150, outlier_fraction=0.3, noise_px=0.0)
     matcher = LineMatcher(scene.right)
