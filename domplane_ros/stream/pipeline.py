@@ -13,7 +13,7 @@ from dataclasses import dataclass, field, replace
 import math
 import time
 
-from domplane_ros.config import EstimatorConfig, PlaneNodeConfig
+from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import can_widen, GRADUATED, TwoStep
 from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.homography import as_homography
@@ -24,8 +24,9 @@ from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
-from domplane_ros.stream.challenge import (Challenge, COARSE, distinct_starts, PRIOR_START,
-                                           PRIOR_STARTS, SCREEN)
+from domplane_ros.stream.candidates import CandidateWork
+from domplane_ros.stream.challenge import (Challenge, COARSE, PRIOR_START, PRIOR_STARTS,
+                                           SCREEN)
 from domplane_ros.stream.detection import carried_features, detect_features, full_mask
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
@@ -45,13 +46,6 @@ SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidate
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
 _WIDE_BASIN_FACTOR = 4.0
-# The prior's candidates (search and challenge) stop iterating once a round moves every
-# prediction by less than this (pixels); the winner is then iterated to
-# ``estimator.tolerance_px`` and verified again. Measured: 37 % fewer rounds on 12 rendered
-# cold starts; evaluate_trust on the tuning seeds published as many correct planes (one more
-# cold start, one rough rig fewer) and no wrong one. At 0.2 px: 63 % fewer rounds, but three
-# fewer correct planes (a cut never re-locked).
-CANDIDATE_TOLERANCE_PX = 0.1
 
 
 @dataclass
@@ -420,7 +414,7 @@ class PlanePipeline:
             self._challenge.add_prior_starts(search.candidates[i] for i in
                                              search.ranked()[:PRIOR_STARTS])
         else:
-            options = (self._candidate_options if task.kind == PRIOR_START
+            options = (self._work().options if task.kind == PRIOR_START
                        else self.config.estimator)
             result = problem.estimate(task.start, options, widen=False)
             if result.ok and not self._checks.rejection_reason(
@@ -430,77 +424,16 @@ class PlanePipeline:
                 if best is not None and verdict is not None and self._trust.beats(verdict, lock):
                     step.warm_start = 'challenger'
                     self._trust.reset()
-                    self._verified(step, *self._finished(step, problem, feats, size, best,
-                                                         verdict))
+                    self._verified(step, *self._work().finished(step, problem, feats, size,
+                                                                best, verdict))
                     self._challenge = None
                     return
         if self._challenge.done:
             self._challenge = None
 
-    @property
-    def _candidate_options(self) -> EstimatorConfig:
-        """Return the estimator settings of the prior's candidates (search and challenge).
-
-        They stop at :data:`CANDIDATE_TOLERANCE_PX` (the slow tail of the iteration, tens of
-        rounds that move the plane by hundredths of a pixel, is left to the winner:
-        :meth:`_finished`). The coarse alignment's few starts, the configured initial
-        homography and the swapped cameras' rivals keep the configured tolerance: they are
-        the search's only route to rigs outside the prior's model, and a coarse start on a
-        periodic floor can need the tail to gather its inliers (measured: the look-alike
-        that names a swap on a tiled floor, tuning seed 68).
-        """
-        options = self.config.estimator
-        if options.tolerance_px >= CANDIDATE_TOLERANCE_PX:
-            return options
-        return replace(options, tolerance_px=CANDIDATE_TOLERANCE_PX)
-
-    def _finished(self, step: PairStep, problem: TwoStep, feats: Features,
-                  size: tuple[int, int], best: PlaneEstimate, verdict: Verdict
-                  ) -> tuple[PlaneEstimate, Verdict]:
-        """Iterate the winning candidate to the configured tolerance and verify it again.
-
-        Returns the finished plane and its verdict (with the candidate's uniqueness among
-        the planes judged beside it), or the candidate and its own verdict where the finished
-        plane is refused (both are verified).
-        """
-        final = problem.estimate(best.homography, self.config.estimator, widen=False)
-        if not final.ok or self._checks.rejection_reason(final, feats, size, bounds=False):
-            return best, verdict
-        again = self._trust.judge(step.left, step.right, final.homography,
-                                  self.config.features.roi)
-        if not again.accepted:
-            return best, verdict
-        return (replace(final, candidates_tried=best.candidates_tried),
-                replace(again, uniqueness=verdict.uniqueness))
-
-    def _coarse_estimates(self, step: PairStep, problem: TwoStep, feats: Features,
-                          size: tuple[int, int]) -> list[PlaneEstimate]:
-        """Return the refined, unrejected planes of the coarse photometric alignment.
-
-        A start within :data:`~domplane_ros.stream.challenge.NEAR_LOCK_PX` of one refined
-        already is not refined again (the parts of the image often give the same plane).
-        """
-        out = []
-        for start in distinct_starts(self._trust.coarse_candidates(step.left, step.right),
-                                     size):
-            result = problem.estimate(start, self.config.estimator, widen=False)
-            if result.ok and not self._checks.rejection_reason(result, feats, size, bounds=False):
-                out.append(result)
-        return out
-
-    def _refined(self, prior_search: PriorSearch, indices: list[int], feats: Features,
-                 size: tuple[int, int]) -> tuple[list[PlaneEstimate], str]:
-        """Refine each candidate of ``indices``: the unrejected planes and the last rejection."""
-        out: list[PlaneEstimate] = []
-        rejection = ''
-        for index in indices:
-            result, rejected = prior_search.refine(
-                [index], self._candidate_options,
-                lambda estimate: self._checks.rejection_reason(estimate, feats, size))
-            rejection = rejected or rejection
-            if result is not None and result.ok:
-                out.append(result)
-        return out, rejection
+    def _work(self) -> CandidateWork:
+        """Return the candidate work on this pair's settings, gate and checks."""
+        return CandidateWork(self.config, self._trust, self._checks)
 
     def _lose_frame(self, step: PairStep, prediction: np.ndarray | None) -> None:
         """Failed or suspicious: carry the plane forward (tracking) or give up (searching)."""
@@ -571,7 +504,8 @@ class PlanePipeline:
         if best is not None and verdict is not None:
             if best is step.initial:
                 step.warm_start = 'initial'
-            self._verified(step, *self._finished(step, problem, feats, size, best, verdict))
+            self._verified(step, *self._work().finished(step, problem, feats, size, best,
+                                                        verdict))
             return
         if len(search.tried) < limit:
             step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
@@ -608,9 +542,9 @@ class PlanePipeline:
         chosen = prior_search.ranked(search.tried)[:max(0, min(budget, limit - len(search.tried)))]
         search.tried.update(chosen)
         step.candidates += len(chosen)
-        refined, rejection = self._refined(prior_search, chosen, feats, size)
+        refined, rejection = self._work().refined(prior_search, chosen, feats, size)
         pool += refined
-        pool += self._coarse_estimates(step, problem, feats, size)
+        pool += self._work().coarse(step, problem, feats, size)
         if search.rivals is None:
             # Once per search the swap is tested, not assumed absent (stream/swap.py). The
             # rivals are iterated to the configured tolerance, not the candidates': a rival

@@ -14,8 +14,8 @@ from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import cut_sequence, plane_error_px, RigError, rough_rig, swapped
-from domplane_ros.stream import pipeline as pipeline_module
 from domplane_ros.stream import trust as trust_module
+from domplane_ros.stream.candidates import CANDIDATE_TOLERANCE_PX
 from domplane_ros.stream.pipeline import LOCKED, PlanePipeline
 from domplane_ros.stream.trust import TrustGate
 import numpy as np
@@ -240,5 +240,5 @@ def test_search_candidates_stop_early_and_the_published_winner_is_finished(monke
     # rivals keep the configured one: a rival left unfinished would make the winner look
     # more unique than it is); the last run, the winner's finish, at the configured one.
     configured = PlaneNodeConfig().estimator.tolerance_px
-    assert tolerances.count(pipeline_module.CANDIDATE_TOLERANCE_PX) >= result.candidates > 0
-    assert tolerances[-1] == configured < pipeline_module.CANDIDATE_TOLERANCE_PX
+    assert tolerances.count(CANDIDATE_TOLERANCE_PX) >= result.candidates > 0
+    assert tolerances[-1] == configured < CANDIDATE_TOLERANCE_PX
