@@ -498,8 +498,9 @@ class PlanePipeline:
         pool, rejection, limit = self._search_pool(step, search, problem, feats, size, motions)
         self.stats.candidates += step.candidates
         step.warm_start = 'search'
-        best, verdict, unverified = self._trust.pick(step.left, step.right, pool,
-                                                     self.config.features.roi, search.rivals)
+        best, verdict, unverified = self._trust.pick(
+            step.left, step.right, pool, self.config.features.roi,
+            lambda: self._swap_rivals(search, step, problem, feats, size))
         search.best = best.homography if best is not None else None
         if best is not None and verdict is not None:
             if best is step.initial:
@@ -545,17 +546,29 @@ class PlanePipeline:
         refined, rejection = self._work().refined(prior_search, chosen, feats, size)
         pool += refined
         pool += self._work().coarse(step, problem, feats, size)
+        return pool, rejection, limit
+
+    def _swap_rivals(self, search: _Search, step: PairStep, problem: TwoStep,
+                     feats: Features, size: tuple[int, int]) -> list[np.ndarray]:
+        """Return the search's planes of swapped cameras, found once per search when needed.
+
+        The swap is tested, not assumed absent (stream/swap.py), but only once a plane has
+        been verified (:meth:`TrustGate.pick` asks for the rivals then): a search whose
+        planes all fail costs no rivals. They are iterated to the configured tolerance, not
+        the candidates': a rival left short of its best would make the winner look more
+        unique than it is.
+        """
         if search.rivals is None:
-            # Once per search the swap is tested, not assumed absent (stream/swap.py). The
-            # rivals are iterated to the configured tolerance, not the candidates': a rival
-            # left short of its best would make the winner look more unique than it is.
+            cfg = self.config
+            candidates = self._candidates(size)
             search.rivals = swap_rivals(
-                problem, candidates, limit, cfg.estimator, cfg.prior.screen_threshold_px,
+                problem, candidates, min(cfg.prior.refine_best, candidates.shape[0]),
+                cfg.estimator, cfg.prior.screen_threshold_px,
                 lambda estimate: self._checks.rejection_reason(estimate, feats, size,
                                                                bounds=False),
                 lambda start: self._trust.polish(step.left, step.right, start,
                                                  cfg.features.roi))
-        return pool, rejection, limit
+        return search.rivals
 
     def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None

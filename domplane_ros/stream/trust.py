@@ -29,7 +29,7 @@ from collections import deque
 from dataclasses import dataclass, replace
 import math
 import statistics
-from typing import Sequence
+from typing import Callable, Sequence
 
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
@@ -207,7 +207,8 @@ class TrustGate:
         return period > 0 and self._locked_frames > 0 and self._locked_frames % period == 0
 
     def pick(self, left: np.ndarray, right: np.ndarray, estimates: Sequence[PlaneEstimate],
-             roi: Sequence[float] | None = None, rivals: Sequence[np.ndarray] | None = None
+             roi: Sequence[float] | None = None,
+             rivals: Sequence[np.ndarray] | Callable[[], Sequence[np.ndarray]] | None = None
              ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
         """Verify every estimate and return the best verified one, if it is unique.
 
@@ -218,7 +219,8 @@ class TrustGate:
         of every distinct plane judged (verified or not; walls and planes through obstacles do
         not compete), of every plane of swapped cameras judged (distinct or not) and of every
         plane of ``rivals``: (3, 3) homographies judged only as rivals, never published (the
-        swapped cameras' planes, :mod:`domplane_ros.stream.swap`).
+        swapped cameras' planes, :mod:`domplane_ros.stream.swap`), or a callable giving
+        them, called only once a plane is verified.
 
         Returns:
             The best verified estimate and its verdict (None, None if none verified or it is
@@ -242,8 +244,9 @@ class TrustGate:
         reasons = [verdict for _, _, verdict in judged if not verdict.accepted]
         swapped = [v for v in reasons if v.swapped and v.verification.accepted]
         if verified:
+            rival_planes = rivals() if callable(rivals) else rivals
             judged += [(None, rival, self.judge(left, right, rival, roi))
-                       for rival in rivals or []]
+                       for rival in rival_planes or []]
             best, best_h, verdict = max(verified, key=lambda item: item[2].score)
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
                             if _rival(v, h, best_h, width, height)]

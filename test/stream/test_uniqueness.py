@@ -124,3 +124,25 @@ def test_confidence_is_the_lesser_of_score_and_uniqueness(scene):
     assert tie.confidence == 0.0
     assert Verdict(True, check.verification, '', uniqueness=5.0).confidence == pytest.approx(
         check.verification.confidence)
+
+
+def test_the_swap_rivals_are_found_only_once_a_plane_is_verified(monkeypatch):
+    calls = []
+    found = pipeline_module.swap_rivals
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return found(*args, **kwargs)
+
+    monkeypatch.setattr(pipeline_module, 'swap_rivals', counted)
+    # Swapped cameras on a floor where nothing of the given order verifies: refused by name,
+    # no rivals needed.
+    frame = swapped(random_scene(4))
+    result = _run(frame)
+    assert not result.ok and 'swapped' in result.reason, result.reason
+    assert not calls
+    # A verified plane: the swap is tested once, before it is published.
+    frame = random_scene(6, floor='random')
+    result = _run(frame)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0
+    assert len(calls) == 1
