@@ -35,7 +35,7 @@ from typing import Any
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
 from domplane_ros.core.homography import (apply_homography, as_homography, as_points,
-                                          check_homography, MIN_DEPTH, normalise_scale,
+                                          check_homography, MIN_W, normalise_scale,
                                           NormalisedRefiner, point_set_reason)
 from domplane_ros.core.lines import (as_segments, endpoints, LineMatcher, lines_reason,
                                      screen_line_candidates, segment_lengths)
@@ -163,7 +163,7 @@ class TwoStep:
     def apply(self, h: np.ndarray) -> np.ndarray:
         """Return the (rows, 2) predictions of every row under ``h``."""
         uvw = self.src_h @ h.T
-        if uvw.shape[0] == 0 or np.min(np.abs(uvw[:, 2])) < MIN_DEPTH:
+        if uvw.shape[0] == 0 or np.min(np.abs(uvw[:, 2])) < MIN_W:
             return apply_homography(h, self.src)
         return uvw[:, :2] / uvw[:, 2:3]
 

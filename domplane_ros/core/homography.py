@@ -19,8 +19,6 @@ import numpy as np
 # Points whose projective depth falls below this are "at infinity": they are placed far away
 # (finite) so that a closest-point search treats them as unmatched.
 _MIN_W = 1e-9
-# The smallest projective depth a mapped point may have (public name of _MIN_W).
-MIN_DEPTH = _MIN_W
 _FAR_PX = 1e9
 # Public names for code that maps many points at once as apply_homography does.
 MIN_W = _MIN_W
@@ -426,13 +424,12 @@ class NormalisedRefiner:
         """Return the pixel homography ``T_dst^-1 G T_src`` scaled so ``H[2, 2] == 1``."""
         return normalise_scale(self.t_dst_inv @ g @ self.t_src)
 
-    def energy(self, g: np.ndarray, dst_n: np.ndarray, weights: np.ndarray | None) -> float:
-        """Return the transfer energy in pixels^2 for normalised ``g`` and destinations."""
-        return self._evaluate(g, dst_n, weights)[0]
-
     def _evaluate(self, g: np.ndarray, dst_n: np.ndarray, weights: np.ndarray | None
                   ) -> tuple[float, tuple[np.ndarray, np.ndarray, np.ndarray] | None]:
-        """Return the transfer energy of ``g`` and its ``(1 / w, px, py)`` (None: inf)."""
+        """Return the transfer energy (pixels^2) of normalised ``g`` and its ``(1 / w, px, py)``.
+
+        The second item is None where a point maps to infinity (energy inf).
+        """
         uvw = self.src_h @ g.T
         iw = uvw[:, 2]
         if np.min(np.abs(iw)) < _MIN_W:

@@ -232,13 +232,11 @@ class LineMatcher:
         query_lines = segment_lines(pred)
         rows = np.arange(n)
         if candidates is None:
+            idx = None
             lines = self.lines
             d1 = x1 @ lines[:, 0:2].T + lines[:, 2]  # (N, M)
             d2 = x2 @ lines[:, 0:2].T + lines[:, 2]
             same = query_lines[:, 0:2] @ lines[:, 0:2].T > 0
-            dist2 = np.where(same, d1 * d1 + d2 * d2, np.inf)
-            best = np.argmin(dist2, axis=1)
-            chosen = best.astype(np.int64)
         else:
             # Zero-length predictions (degenerate H) get a key from the point alone.
             k = int(min(candidates, self.lines.shape[0]))
@@ -249,9 +247,9 @@ class LineMatcher:
             d2 = cand[:, :, 0] * x2[:, 0:1] + cand[:, :, 1] * x2[:, 1:2] + cand[:, :, 2]
             same = (cand[:, :, 0] * query_lines[:, 0:1]
                     + cand[:, :, 1] * query_lines[:, 1:2]) > 0
-            dist2 = np.where(same, d1 * d1 + d2 * d2, np.inf)
-            best = np.argmin(dist2, axis=1)
-            chosen = idx[rows, best].astype(np.int64)
+        dist2 = np.where(same, d1 * d1 + d2 * d2, np.inf)
+        best = np.argmin(dist2, axis=1)
+        chosen = (best if idx is None else idx[rows, best]).astype(np.int64)
         line = self.lines[chosen]
         found = same[rows, best]
         e1 = np.where(found, d1[rows, best], 0.0)
