@@ -55,6 +55,7 @@ class FeatureConfig(_Section):
     grid_cols: int = 4
     roi: tuple[float, float, float, float] = (0.0, 0.0, 1.0, 1.0)
     max_width: int = 1280
+    max_megapixels: float = 0.6
     kind: str = 'points'
     max_lines: int = 150
     min_line_length_px: float = 25.0

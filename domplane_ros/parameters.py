@@ -48,7 +48,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
     ParamSpec('features.min_distance_px', 8.0, 'float',
               'Minimum distance between two detected corners, in pixels.', 1.0, 200.0),
     ParamSpec('features.block_size', 5, 'int',
-              'Neighbourhood size of the corner detector, in pixels.', 3, 31),
+              'Neighbourhood size of the corner detector, in full-resolution pixels (on a '
+              'pyramid level the odd size nearest its extent there, at least 3).', 3, 31),
     ParamSpec('features.grid_rows', 4, 'int',
               'Rows of the detection grid; each cell keeps its share of the corners.', 1, 32),
     ParamSpec('features.grid_cols', 4, 'int',
@@ -60,7 +61,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Working resolution: corners and lines are detected, corners tracked and the mask '
               'computed on the Gaussian pyramid level (halvings) whose width is at most this; '
               'the plane is estimated in full pixels. features.*, tracking.* and mask.* pixel '
-              'sizes are at that level. 0: full resolution.', 0, 100000),
+              'sizes are at that level (features.block_size: full pixels). 0: no width limit.',
+              0, 100000),
+    ParamSpec('features.max_megapixels', 0.6, 'float',
+              'Working resolution by size: the level is also at most this many million pixels '
+              '(0.6: 640x480 and KITTI at full resolution, 1280x720 on 640x360, 3840x2160 on '
+              '960x540). 0: no size limit.', 0.0, 1000.0),
     ParamSpec('features.kind', 'points', 'str',
               'Features the plane is estimated from: points (corners), lines (straight line '
               'segments) or both.', choices=FEATURE_KINDS),

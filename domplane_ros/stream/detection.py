@@ -8,11 +8,14 @@ verification and the acceptance checks work in full pixels. These helpers do the
 
 from __future__ import annotations
 
+from dataclasses import replace
+import functools
+
 import cv2
-from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.config import FeatureConfig, PlaneNodeConfig
 from domplane_ros.core.features import corners_in_region, detect_corners, Features
 from domplane_ros.core.lines import detect_lines
-from domplane_ros.core.pyramid import WorkingImage
+from domplane_ros.core.pyramid import detector_block, WorkingImage
 from domplane_ros.stream.motion import enough_carried
 import numpy as np
 
@@ -30,8 +33,9 @@ def detect_features(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfi
         corners = (none_pts, none_pts)
         left_pts = right_pts = none_pts
     else:
-        corners = (detect_corners(left.image, cfg.features),
-                   detect_corners(right.image, cfg.features))
+        features = level_features(cfg.features, left.level)
+        corners = (detect_corners(left.image, features),
+                   detect_corners(right.image, features))
         left_pts, right_pts = (full_corners(image, points)
                                for image, points in zip((left, right), corners))
     left_seg, right_seg = _segments(left, right, cfg)
@@ -53,7 +57,8 @@ def carried_features(left: WorkingImage, right: WorkingImage,
     :func:`detect_features` does, and the working-level corners (which the tracker uses next)
     and the indices of the tracked positions kept are returned too.
     """
-    kept = tuple(corners_in_region(image.image, points, cfg.features)
+    features = level_features(cfg.features, left.level)
+    kept = tuple(corners_in_region(image.image, points, features)
                  for image, points in zip((left, right), tracked))
     corners = (tracked[0][kept[0]], tracked[1][kept[1]])
     if not enough_carried(corners, counts):
@@ -62,6 +67,17 @@ def carried_features(left: WorkingImage, right: WorkingImage,
                            for image, points in zip((left, right), corners))
     left_seg, right_seg = _segments(left, right, cfg)
     return Features(left_pts, right_pts, left_seg, right_seg), corners, (kept[0], kept[1])
+
+
+@functools.lru_cache(maxsize=16)
+def level_features(features: FeatureConfig, level: int) -> FeatureConfig:
+    """Return the corner detector's settings on pyramid ``level``.
+
+    ``features.block_size`` keeps its extent in full pixels
+    (:func:`~domplane_ros.core.pyramid.detector_block`); the other sizes are at the level.
+    """
+    block = detector_block(features.block_size, level)
+    return features if block == features.block_size else replace(features, block_size=block)
 
 
 def _segments(left: WorkingImage, right: WorkingImage, cfg: PlaneNodeConfig

@@ -27,7 +27,8 @@ from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork
 from domplane_ros.stream.challenge import (Challenge, COARSE, PRIOR_START, PRIOR_STARTS,
                                            SCREEN)
-from domplane_ros.stream.detection import carried_features, detect_features, full_mask
+from domplane_ros.stream.detection import (carried_features, detect_features, full_mask,
+                                           level_features)
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import FrameTracker
@@ -180,8 +181,8 @@ class PlanePipeline:
         fast = joint_speed is not None and abs(joint_speed) > cfg.pipeline.fast_joint_velocity
         if check.refused:
             return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
-        work = (WorkingImage.of(left, cfg.features.max_width),
-                WorkingImage.of(right, cfg.features.max_width))
+        work = (WorkingImage.of(left, cfg.features.max_width, cfg.features.max_megapixels),
+                WorkingImage.of(right, cfg.features.max_width, cfg.features.max_megapixels))
         feats, track_pts, motions, carried, spans = self._features(*work)
         self.stats.carried += carried is not None
         t3 = time.perf_counter()
@@ -278,8 +279,8 @@ class PlanePipeline:
         """Return the working-level corners to track from (detected if only lines are used)."""
         if not self.config.tracking.enabled or self.config.features.kind != 'lines':
             return corners
-        return (detect_corners(left.image, self.config.features),
-                detect_corners(right.image, self.config.features))
+        features = level_features(self.config.features, left.level)
+        return detect_corners(left.image, features), detect_corners(right.image, features)
 
     # --- Features and temporal prediction ------------------------------------------------
     def _features(self, left: WorkingImage, right: WorkingImage

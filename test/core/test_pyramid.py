@@ -6,7 +6,7 @@ import cv2
 from domplane_ros.config import FeatureConfig
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import apply_homography
-from domplane_ros.core.pyramid import motion_to_full, working_level, WorkingImage
+from domplane_ros.core.pyramid import detector_block, motion_to_full, working_level, WorkingImage
 from domplane_ros.sim.generators import random_scene
 import numpy as np
 import pytest
@@ -18,6 +18,28 @@ from scipy.spatial import cKDTree
     (3840, 1280, 2), (1242, 1280, 0), (640, 0, 0), (3840, 0, 0), (5, 1, 3)])
 def test_working_level_is_the_first_level_not_wider_than_max_width(width, max_width, level):
     assert working_level(width, max_width) == level
+
+
+@pytest.mark.parametrize('width, height, max_width, megapixels, level', [
+    (640, 480, 1280, 0.6, 0), (1242, 375, 1280, 0.6, 0), (1280, 720, 1280, 0.6, 1),
+    (1920, 1080, 1280, 0.6, 1), (3840, 2160, 1280, 0.6, 2), (3840, 2160, 0, 0.6, 2),
+    (1280, 720, 0, 0.0, 0), (1280, 720, 640, 0.0, 1), (1281, 721, 0, 0.24, 1),
+    (1281, 721, 0, 0.2, 2)])
+def test_working_level_meets_the_width_and_the_size_limit(width, height, max_width, megapixels,
+                                                          level):
+    assert working_level(width, max_width, height, megapixels) == level
+    gray = np.zeros((height, width), np.uint8)
+    work = WorkingImage.of(gray, max_width, megapixels)
+    assert work.level == level
+    h, w = work.image.shape
+    assert megapixels == 0 or w * h <= 1e6 * megapixels
+    assert max_width == 0 or w <= max_width
+
+
+@pytest.mark.parametrize('block, level, expected', [
+    (5, 0, 5), (4, 0, 4), (5, 1, 3), (5, 2, 3), (11, 1, 5), (11, 2, 3), (31, 1, 15)])
+def test_detector_block_keeps_its_full_pixel_extent(block, level, expected):
+    assert detector_block(block, level) == expected
 
 
 def test_working_image_halves_per_level():
@@ -89,3 +111,25 @@ def test_scaled_corners_sit_on_the_full_resolution_corners(max_width, level):
     distance, _ = cKDTree(truth).query(scaled)
     assert np.count_nonzero(distance < 1.0) >= 30
     assert np.median(distance[distance < 1.0]) < 0.2
+
+
+def test_level_window_corners_repeat_closer_than_the_full_resolution_window():
+    """On level 1 the detector window of the same full-pixel extent localises corners better.
+
+    Measured on rendered 1280x720 floors, seeds 0-3: the median distance of repeated floor
+    corners (within 1.5 px) 0.21 / 0.41 / 0.71 / 0.69 px with the 5-pixel window on the
+    level, 0.16 / 0.34 / 0.52 / 0.60 px with its level-1 window of 3 pixels (0.15 / 0.20 /
+    0.54 / 0.42 px at full resolution).
+    """
+    for seed in range(4):
+        frame = random_scene(seed, width=1280, height=720, floor='random')
+        medians = []
+        for block in (5, detector_block(5, 1)):
+            config = FeatureConfig(block_size=block)
+            corners = []
+            for gray in (frame.left, frame.right):
+                work = WorkingImage.of(gray, 640)
+                corners.append(work.scale * detect_corners(work.image, config))
+            distance = _floor_repeat_distances(frame, *corners)
+            medians.append(np.median(distance[distance < 1.5]))
+        assert medians[1] < 0.9 * medians[0], (seed, medians)
