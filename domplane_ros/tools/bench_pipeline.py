@@ -37,6 +37,7 @@ import cv2
 from domplane_ros.config import FeatureConfig, PlaneNodeConfig, PriorConfig
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.image import message_to_gray
+from domplane_ros.core.pyramid import working_level
 from domplane_ros.sim.generators import random_scene, scene_sequence
 from domplane_ros.sim.truth import every_floor_pixel
 from domplane_ros.stream.pipeline import PlanePipeline
@@ -159,8 +160,10 @@ def bench_warm(width: int, height: int, n_frames: int, seed: int,
         whole.base_err.append(frame.error(h))
         tracker.ours.append(1e-3 * result.timings_ms['tracking'])
         mask.ours.append(1e-3 * result.timings_ms['mask'])
-    level = config.features.max_width
-    whole.note = f'features.max_width {level}'
+    features = config.features
+    level = working_level(width, features.max_width, height, features.max_megapixels)
+    whole.note = (f'working {-(-width >> level)}x{-(-height >> level)} (features.max_width '
+                  f'{features.max_width}, max_megapixels {features.max_megapixels:g})')
     return [whole, tracker, mask]
 
 
@@ -270,7 +273,8 @@ def _plane_node(prior: PriorConfig, features: FeatureConfig) -> Any:
         Parameter('prior.baseline_over_height', value=list(prior.baseline_over_height)),
         Parameter('prior.tilt_deg', value=list(prior.tilt_deg)),
         Parameter('prior.vergence_deg', value=list(prior.vergence_deg)),
-        Parameter('features.max_width', value=features.max_width)])
+        Parameter('features.max_width', value=features.max_width),
+        Parameter('features.max_megapixels', value=features.max_megapixels)])
 
 
 def _spin_until(executor: Any, done: Callable[[], bool], timeout_s: float,
