@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import functools
+
 import cv2
 from domplane_ros.config import FeatureConfig
 from domplane_ros.core.features import detect_corners
@@ -60,6 +62,12 @@ def test_motion_to_full_maps_full_pixels_as_the_working_motion_maps_working_pixe
     assert motion_to_full(motion, 1.0) is motion
 
 
+@functools.lru_cache(maxsize=3)
+def _scene_720p(seed: int):
+    """Return the rendered 1280x720 floor of ``seed`` (rendered once for the module)."""
+    return random_scene(seed, width=1280, height=720, floor='random')
+
+
 def _floor_repeat_distances(frame, left: np.ndarray, right: np.ndarray) -> np.ndarray:
     """Return each left floor corner's distance from H p to the closest right corner."""
     floor = cv2.erode((frame.plane_left & frame.visible_in_right).astype(np.uint8),
@@ -77,7 +85,7 @@ def test_level_one_corners_scaled_to_full_pixels_repeat_under_the_true_homograph
     The measure is the estimator's: a left floor corner mapped by the true plane homography
     should land on a right corner.
     """
-    frame = random_scene(seed, width=1280, height=720, floor='random')
+    frame = _scene_720p(seed)
     config = FeatureConfig(max_width=640)
     scaled, full = [], []
     for gray in (frame.left, frame.right):
@@ -119,10 +127,10 @@ def test_level_window_corners_repeat_closer_than_the_full_resolution_window():
     Measured on rendered 1280x720 floors, seeds 0-3: the median distance of repeated floor
     corners (within 1.5 px) 0.21 / 0.41 / 0.71 / 0.69 px with the 5-pixel window on the
     level, 0.16 / 0.34 / 0.52 / 0.60 px with its level-1 window of 3 pixels (0.15 / 0.20 /
-    0.54 / 0.42 px at full resolution).
+    0.54 / 0.42 px at full resolution); seeds 0-2 are checked (rendered once for the module).
     """
-    for seed in range(4):
-        frame = random_scene(seed, width=1280, height=720, floor='random')
+    for seed in range(3):
+        frame = _scene_720p(seed)
         medians = []
         for block in (5, detector_block(5, 1)):
             config = FeatureConfig(block_size=block)
