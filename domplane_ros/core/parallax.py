@@ -31,6 +31,7 @@ import functools
 from typing import Sequence
 
 import cv2
+from domplane_ros.core.scratch import scratch
 import numpy as np
 
 # Focal lengths tried between the prior's bounds (geometric spacing).
@@ -145,7 +146,8 @@ def infinity_shift(homography: np.ndarray, width: int, height: int,
     Returns:
         (h, w) float32 ``shift_inf`` in full-resolution pixels (module docstring): positive
         below the horizon, zero on it, negative above it; large negative where the pixel's ray
-        misses the plane at infinity in front of the camera.
+        misses the plane at infinity in front of the camera. A view of this thread's scratch
+        array (:mod:`domplane_ros.core.scratch`): valid until the next call.
 
     """
     h_inf = infinity_homography(homography, width, height, focal_px, principal_point_px)
@@ -165,7 +167,8 @@ def infinity_shift(homography: np.ndarray, width: int, height: int,
         shift = num / den - gx
     shift = np.where((den > 1e-12) & np.isfinite(shift), shift, -_MAX_SHIFT_PX)
     shift = np.clip(shift, -_MAX_SHIFT_PX, _MAX_SHIFT_PX).astype(np.float32)
-    dense = cv2.resize(shift, (grid_w * step, grid_h * step), interpolation=cv2.INTER_LINEAR)
+    dense = cv2.resize(shift, (grid_w * step, grid_h * step), interpolation=cv2.INTER_LINEAR,
+                       dst=scratch('infinity shift', (grid_h * step, grid_w * step)))
     return dense[step:step + work_h, step:step + work_w]
 
 

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 import dataclasses
 
 import cv2
 from domplane_ros.config import MaskConfig
-from domplane_ros.core import mask
+from domplane_ros.core import mask, residual
 from domplane_ros.sim.generators import indoor_scene, random_scene
 from domplane_ros.sim.model import Box, CameraSetup, StereoFrame
 from domplane_ros.sim.render import render_stereo
@@ -111,7 +112,7 @@ def test_coarse_flow_is_not_dragged_by_tall_objects(frames):
         warped, valid = mask._warp_to_left(left, right, hom, left.shape[::-1])
         ground = cv2.resize((frame.plane_left & frame.visible_in_right).astype(np.uint8),
                             left.shape[::-1], interpolation=cv2.INTER_NEAREST).astype(bool)
-        medians.append(float(np.median(np.abs(mask._flow_shift(left, warped)[ground & valid]))))
+        medians.append(float(np.median(np.abs(residual.flow_shift(left, warped)[ground & valid]))))
     assert max(medians) < 1.0, medians
 
 
@@ -418,3 +419,31 @@ def test_mask_scores_on_a_known_example():
     assert np.isnan(empty['obstacle_recall'])
     with pytest.raises(ValueError, match='plane_truth'):
         mask.mask_scores(labels, plane[:, :2], obstacle)
+
+
+def test_results_do_not_share_the_scratch_arrays_across_calls_or_threads():
+    # The float images are reused between calls (core/scratch.py): a result must not change
+    # when the next mask is computed, and threads must not share the arrays.
+    first, second = random_scene(0), random_scene(3)
+    one = mask.parallax_mask(first.left, first.right, first.homography, CONFIG)
+    kept = (one.labels.copy(), one.parallax.copy())
+    two = mask.parallax_mask(second.left, second.right, second.homography, CONFIG)
+    assert np.array_equal(one.labels, kept[0]) and np.array_equal(one.parallax, kept[1])
+    assert not np.array_equal(one.labels, two.labels)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        runs = list(pool.map(lambda f: mask.parallax_mask(f.left, f.right, f.homography, CONFIG),
+                             [first, second] * 4))
+    for run, alone in zip(runs, [one, two] * 4):
+        assert np.array_equal(run.labels, alone.labels)
+        assert np.array_equal(run.parallax, alone.parallax)
+
+
+@pytest.mark.parametrize('shape', [(240, 320), (7, 5), (1, 1)])
+def test_upsampling_by_two_is_nearest_neighbour(shape):
+    labels = np.random.default_rng(1).integers(0, 256, shape, dtype=np.uint8)
+    size = (2 * shape[1], 2 * shape[0])
+    expected = cv2.resize(labels, size, interpolation=cv2.INTER_NEAREST_EXACT)
+    assert np.array_equal(mask._upsample(labels, size), expected)
+    odd = (2 * shape[1] + 1, 2 * shape[0])
+    assert np.array_equal(mask._upsample(labels, odd),
+                          cv2.resize(labels, odd, interpolation=cv2.INTER_NEAREST_EXACT))

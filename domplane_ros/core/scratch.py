@@ -1,0 +1,46 @@
+"""Working arrays reused between calls, one set per thread (the mask's float images).
+
+A fresh (h, w) float32 array of a 320 x 240 working image is 300 kB: the C allocator maps
+it from the operating system and unmaps it when freed, so every new one costs page faults,
+and the mask made about twenty per call. Measured on the mask at 640 x 480 (docs/MASK.md,
+round 4): its float stages took about twice as long with fresh arrays as with reused ones.
+:func:`scratch` hands out the same array for the same name, shape and dtype again; what it
+holds on return is undefined, and no caller may keep it past its own call or return it.
+Nothing computed is kept: results never depend on earlier calls.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+
+class _Arrays(threading.local):
+    """The calling thread's arrays by name (one array per name: the latest shape)."""
+
+    def __init__(self) -> None:
+        self.by_name: dict[str, np.ndarray] = {}
+
+
+_ARRAYS = _Arrays()
+
+
+def scratch(name: str, shape: tuple[int, ...], dtype: type = np.float32) -> np.ndarray:
+    """Return this thread's working array ``name`` of ``shape`` and ``dtype`` (contents undefined).
+
+    Args:
+        name: What the array is for; two arrays alive at once need two names.
+        shape: The array's shape.
+        dtype: The array's dtype (default float32).
+
+    Returns:
+        A C-contiguous array, the same object as the last call with this name, shape and
+        dtype in this thread.
+
+    """
+    array = _ARRAYS.by_name.get(name)
+    if array is None or array.shape != shape or array.dtype != dtype:
+        array = np.empty(shape, dtype)
+        _ARRAYS.by_name[name] = array
+    return array
