@@ -44,7 +44,7 @@ from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
 from domplane_ros.core.residual import local_fit, LocalFit
-from domplane_ros.core.scratch import scratch
+from domplane_ros.core.scratch import constant
 import numpy as np
 
 PLANE = 255
@@ -134,14 +134,15 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray) 
     ids = components.astype(np.uint16)
     square = np.ones((3, 3), np.uint8)
     largest = cv2.dilate(ids, square)
-    ids[ids == 0] = 65535
-    smallest = cv2.erode(ids, square)
+    # The smallest id by an erosion of id - 1, where 0 (no component) wraps to 65535.
+    ids -= np.uint16(1)
+    smallest = cv2.erode(ids, square, dst=ids)
+    smallest += np.uint16(1)
     outline = (largest > 0) & (components == 0) & valid[::2, ::2]
     is_plane = labels[::2, ::2][outline] == PLANE
     first = largest[outline].astype(np.int64)
     second = smallest[outline].astype(np.int64)
     second[second == first] = 0  # one vote per component
-    second[second == 65535] = 0
     total = np.bincount(first, minlength=count) + np.bincount(second, minlength=count)
     plane = (np.bincount(first, weights=is_plane, minlength=count)
              + np.bincount(second, weights=is_plane, minlength=count))
@@ -329,9 +330,7 @@ def _copy_where(source: np.ndarray, where: np.ndarray, target: np.ndarray) -> No
 
 def _set_where(target: np.ndarray, value: float, where: np.ndarray) -> None:
     """Set ``target`` to ``value`` where the (h, w) bool ``where`` holds, in place."""
-    constant = scratch(f'constant {target.dtype}', target.shape, target.dtype)
-    constant.fill(value)
-    _copy_where(constant, where, target)
+    _copy_where(constant(value, target.shape, target.dtype), where, target)
 
 
 def _clean(labels: np.ndarray, valid: np.ndarray, decidable: np.ndarray, morph: int) -> None:

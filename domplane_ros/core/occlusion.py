@@ -238,12 +238,18 @@ def _lead_px(obstacle: np.ndarray, shadow: np.ndarray, rows: np.ndarray, cols: n
 
 
 def _ncc(a_image: np.ndarray, b_image: np.ndarray) -> np.ndarray:
-    """Return the (h, w) float32 zero-shift normalised correlation of two images' windows."""
+    """Return the (h, w) float32 zero-shift normalised correlation of two uint8 images' windows."""
     a = a_image.astype(np.float32)
     b = b_image.astype(np.float32)
     size = (_WINDOW_PX, _WINDOW_PX)
-    mean_a, mean_b = cv2.blur(a, size), cv2.blur(b, size)
-    var_a = cv2.blur(a * a, size) - mean_a * mean_a
-    var_b = cv2.blur(b * b, size) - mean_b * mean_b
-    cov = cv2.blur(a * b, size) - mean_a * mean_b
-    return cov / np.sqrt(np.maximum(var_a * var_b, 1e-6))
+    mean_a = cv2.boxFilter(a_image, cv2.CV_32F, size)
+    mean_b = cv2.boxFilter(b_image, cv2.CV_32F, size)
+    var_a = cv2.blur(cv2.multiply(a, a), size)
+    var_a -= cv2.multiply(mean_a, mean_a)
+    var_b = cv2.blur(cv2.multiply(b, b), size)
+    var_b -= cv2.multiply(mean_b, mean_b)
+    cov = cv2.blur(cv2.multiply(a, b), size)
+    cov -= cv2.multiply(mean_a, mean_b, dst=mean_a)
+    norm = cv2.multiply(var_a, var_b, dst=var_a)
+    np.maximum(norm, np.float32(1e-6), out=norm)
+    return cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)

@@ -6,7 +6,8 @@ and the mask made about twenty per call. Measured on the mask at 640 x 480 (docs
 round 4): its float stages took about twice as long with fresh arrays as with reused ones.
 :func:`scratch` hands out the same array for the same name, shape and dtype again; what it
 holds on return is undefined, and no caller may keep it past its own call or return it.
-Nothing computed is kept: results never depend on earlier calls.
+Nothing computed is kept: results never depend on earlier calls. :func:`constant` keeps
+read-only arrays of one value (masked fills with ``cv2.copyTo``).
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ class _Arrays(threading.local):
 
 
 _ARRAYS = _Arrays()
+# More constant arrays than this (image sizes change) and the thread's set starts again.
+_MAX_CONSTANTS = 16
 
 
 def scratch(name: str, shape: tuple[int, ...], dtype: type = np.float32) -> np.ndarray:
@@ -43,4 +46,37 @@ def scratch(name: str, shape: tuple[int, ...], dtype: type = np.float32) -> np.n
     if array is None or array.shape != shape or array.dtype != dtype:
         array = np.empty(shape, dtype)
         _ARRAYS.by_name[name] = array
+    return array
+
+
+class _Constants(threading.local):
+    """The calling thread's constant arrays by value, shape and dtype."""
+
+    def __init__(self) -> None:
+        self.by_key: dict[tuple, np.ndarray] = {}
+
+
+_CONSTANTS = _Constants()
+
+
+def constant(value: float, shape: tuple[int, ...], dtype: type) -> np.ndarray:
+    """Return a read-only array of ``shape`` and ``dtype`` filled with ``value`` (reused).
+
+    Args:
+        value: The fill value.
+        shape: The array's shape.
+        dtype: The array's dtype.
+
+    Returns:
+        This thread's array for that value, shape and dtype (made once, never written).
+
+    """
+    key = (float(value), tuple(shape), np.dtype(dtype).str)
+    array = _CONSTANTS.by_key.get(key)
+    if array is None:
+        if len(_CONSTANTS.by_key) >= _MAX_CONSTANTS:
+            _CONSTANTS.by_key.clear()
+        array = np.full(shape, value, dtype)
+        array.flags.writeable = False
+        _CONSTANTS.by_key[key] = array
     return array
