@@ -83,28 +83,28 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
     """
     shape = left.shape
     size = (window, window)
-    a, b, tmp = scratch('a', shape), scratch('b', shape), scratch('tmp', shape)
-    np.copyto(a, left)
-    np.copyto(b, warped)
-    mean_a = cv2.boxFilter(left, cv2.CV_32F, size, dst=scratch('mean_a', shape))
-    mean_b = cv2.boxFilter(warped, cv2.CV_32F, size, dst=scratch('mean_b', shape))
-    var_a = _window_product(a, a, size, scratch('var_a', shape))
+    f32 = cv2.CV_32F
+    tmp = scratch('tmp', shape)
+    mean_a = cv2.boxFilter(left, f32, size, dst=scratch('mean_a', shape))
+    mean_b = cv2.boxFilter(warped, f32, size, dst=scratch('mean_b', shape))
+    # Products of the uint8 images straight into float32 (no float copies of the images).
+    var_a = _window_product(left, left, size, scratch('var_a', shape))
     var_a -= cv2.multiply(mean_a, mean_a, dst=tmp)
-    var_b = _window_product(b, b, size, scratch('var_b', shape))
+    var_b = _window_product(warped, warped, size, scratch('var_b', shape))
     var_b -= cv2.multiply(mean_b, mean_b, dst=tmp)
-    cov = _window_product(a, b, size, scratch('ncc', shape))
+    cov = _window_product(left, warped, size, scratch('ncc', shape))
     cov -= cv2.multiply(mean_a, mean_b, dst=tmp)
     norm = cv2.multiply(var_a, var_b, dst=tmp)
     np.maximum(norm, np.float32(1e-6), out=norm)
     ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
     # The Sobel filter is linear: one pass over a + b gives the sum of both gradients.
-    grad = cv2.Sobel(cv2.add(a, b, dst=tmp), cv2.CV_32F, 1, 0, dst=var_b, ksize=3,
+    grad = cv2.Sobel(cv2.add(left, warped, dst=tmp, dtype=f32), f32, 1, 0, dst=var_b, ksize=3,
                      scale=0.0625)
-    diff = cv2.subtract(b, a, dst=b)
+    diff = cv2.subtract(warped, left, dst=scratch('diff', shape), dtype=f32)
     diff -= mean_b
     diff += mean_a
     num = _window_product(grad, diff, size, diff)
-    den = _window_product(grad, grad, size, a)
+    den = _window_product(grad, grad, size, mean_b)
     den += np.float32(_REGULARISER)
     shift = cv2.divide(num, den, dst=num)
     return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=flow_shift(left, warped))
@@ -113,7 +113,7 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
 def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int],
                     out: np.ndarray) -> np.ndarray:
     """Return the window mean of ``first * second`` in ``out`` ((h, w) float32)."""
-    cv2.multiply(first, second, dst=out)
+    cv2.multiply(first, second, dst=out, dtype=cv2.CV_32F)
     return cv2.blur(out, size, dst=out)
 
 
