@@ -62,6 +62,11 @@ _REJECT_NCC = 0.5
 # Where an obstacle of the minimum height would not show, an obstacle needs this many times
 # the parallax threshold (the coarse flow is not trusted near it there).
 _FAR_FACTOR = 3.0
+# The bottom of an obstacle: a pixel measured within the threshold but nearer than the plane
+# by at least this share of it, with an obstacle at most _RISE_ROWS working pixels above it in
+# its column, is unknown, not plane (chosen on the tuning scenes, docs/MASK.md round 4).
+_RISE_SHARE = 0.4
+_RISE_ROWS = 8
 # An unknown region is filled as plane when at least this share of its outline inside the
 # right image is plane, and that outline has at least this many pixels.
 _FILL_OUTLINE_SHARE = 0.95
@@ -217,7 +222,10 @@ def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     shift_inf = infinity_shift(same_size, width, height, focal, (small_w, small_h),
                                principal_point_px)
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config)
+    rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
+    rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
     _clean(labels, valid, decidable, int(config.morph_px))
+    _unknown_below_obstacles(labels, rising)
     hidden = occlusion_shadow(left_small, warped, labels == OBSTACLE)
     _set_where(labels, UNKNOWN, hidden)
     _set_where(parallax, NOT_MEASURED, hidden)
@@ -351,6 +359,24 @@ def _clean(labels: np.ndarray, valid: np.ndarray, decidable: np.ndarray, morph: 
     closed = cv2.morphologyEx((labels == PLANE).view(np.uint8), cv2.MORPH_CLOSE,
                               square).view(bool)
     _set_where(labels, PLANE, closed & (labels == UNKNOWN) & valid & decidable)
+
+
+def _unknown_below_obstacles(labels: np.ndarray, rising: np.ndarray) -> None:
+    """Label unknown, in place, plane pixels that rise into an obstacle just above them.
+
+    The bottom of a wall or a box below the minimum height shows less parallax than the
+    threshold, so it measures as plane; but its parallax is positive (nearer than the plane)
+    and grows up to the obstacle above, while the ground's is zero up to noise. A plane pixel
+    whose measured parallax is at least :data:`_RISE_SHARE` of the threshold (``rising``,
+    (h, w) bool) with an obstacle at most :data:`_RISE_ROWS` rows above it in its column
+    cannot be told from that bottom: it becomes unknown.
+    """
+    if not rising.any():
+        return
+    column = np.ones((_RISE_ROWS + 1, 1), np.uint8)
+    # Dilated downwards: pixel y sees the obstacles in rows y - _RISE_ROWS .. y.
+    below = cv2.dilate((labels == OBSTACLE).view(np.uint8), column, anchor=(0, _RISE_ROWS))
+    _set_where(labels, UNKNOWN, rising & below.view(bool) & (labels == PLANE))
 
 
 def _upsample(labels: np.ndarray, size: tuple[int, int]) -> np.ndarray:
