@@ -155,7 +155,12 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray) 
     fill[0] = False
     if not fill.any():
         return
-    chosen = fill.view(np.uint8)[components]
+    if count <= 256:  # a table lookup on bytes, ten times faster than fancy indexing
+        table = np.zeros(256, np.uint8)
+        table[:count] = fill
+        chosen = cv2.LUT(components.astype(np.uint8), table)
+    else:
+        chosen = fill.view(np.uint8)[components]
     height, width = labels.shape
     chosen = _upsample(chosen, (2 * chosen.shape[1], 2 * chosen.shape[0]))[:height, :width]
     _set_where(labels, PLANE, chosen.view(bool) & fillable)

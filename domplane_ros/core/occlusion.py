@@ -56,6 +56,9 @@ _SAME_SURFACE_NCC = 0.7
 _LEAD_PX = 8
 _WINDOW_PX = 7
 _EDGE_TRIM_PX = 4
+# Rows (working pixels) the matcher's band reaches beyond the obstacles: the half-size pixels
+# it decides depend on 8 half rows around them (pyrDown 1, the pre-filter 4, the block 3).
+_BAND_MARGIN_PX = 16
 
 
 def block_parallax(left: np.ndarray, warped: np.ndarray) -> np.ndarray | None:
@@ -100,8 +103,8 @@ def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
     if rows.size == 0:
         return shadow
     # Even bounds, so that the half-size band lies on the same grid as the whole image.
-    top = max(0, (int(rows[0]) - 4 * _BLOCK_PX) & ~1)
-    bottom = min(height, (int(rows[-1]) + 4 * _BLOCK_PX + 2) & ~1)
+    top = max(0, (int(rows[0]) - _BAND_MARGIN_PX) & ~1)
+    bottom = min(height, (int(rows[-1]) + _BAND_MARGIN_PX + 2) & ~1)
     if bottom - top < 4 * _BLOCK_PX or width < 2 * (_DISPARITIES + _BLOCK_PX + 1):
         return shadow  # too small for the matcher
     band = slice(top, bottom)
