@@ -1,9 +1,10 @@
 """Working arrays reused between calls, one set per thread (the mask's float images).
 
-A fresh (h, w) float32 array of a 320 x 240 working image is 300 kB: the C allocator maps
-it from the operating system and unmaps it when freed, so every new one costs page faults,
-and the mask made about twenty per call. Measured on the mask at 640 x 480 (docs/MASK.md,
-round 4): its float stages took about twice as long with fresh arrays as with reused ones.
+A fresh (h, w) float32 array of a 320 x 240 working image is 300 kB: when the C allocator
+has given such memory back to the operating system, every new one costs page faults, and the
+mask made about twenty per call. In a process that runs only the mask (docs/MASK.md, round 4)
+the local fit took twice as long with fresh arrays as with reused ones; where other work keeps
+the allocator's memory (the pipeline) the difference is small.
 :func:`scratch` hands out the same array for the same name, shape and dtype again; what it
 holds on return is undefined, and no caller may keep it past its own call or return it.
 Nothing computed is kept: results never depend on earlier calls. :func:`constant` keeps
