@@ -130,8 +130,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               '1/1000); empty means search the prior.', lengths=(0, 9)),
     # Verification (every plane is verified before it is published).
     ParamSpec('verification.min_score', 0.25, 'float',
-              'Least verification score (share of the textured image that the plane, and not '
-              'the same plane moved 6 px, explains) for a plane to be published; the '
+              'Least verification score for a plane to be published: the share of the '
+              'textured image that the plane explains and the same plane moved 3 working '
+              'pixels sideways or 1.5 up or down does not (12 and 6 px at 640 x 480); the '
               'confidence is 0.5 there, 0 at min_score - 0.1 and 1 at min_score + 0.1.',
               0.11, 0.89),
     ParamSpec('verification.scale', 0.25, 'float',

@@ -53,6 +53,18 @@ CHALLENGE_MARGIN = 1.2
 # the true planes published scored at least 0.16 there (1st percentile), the planes through
 # boxes above a floor that passed the verification 0.0.
 MIN_BOTTOM_SCORE = 0.05
+# ... and at least this share of its own score: the ground explains the bottom of the image at
+# least about as well as the whole (true planes of 100 rendered tuning scenes: 0.37 and more,
+# median above 1), a plane through a far wall or the boxes' faces mostly above it (measured:
+# 0.10, a wall plane on a faint tiled floor, tuning seed 212, 8 px off the floor).
+MIN_BOTTOM_SHARE = 0.25
+# A published plane may have at most this share of the textured image below it
+# (PlaneVerification.below_fraction: texture with less disparity than the plane, beyond it):
+# nothing is seen below the ground. Measured: true planes at most 0.004 on 100 rendered tuning
+# scenes (median 0.0006), 0.018 for a published plane 0.8 px off a faint tiled floor; planes
+# 6-7 px off through the faces of boxes on faint tiled floors (tuning seeds 188, 305) 0.047
+# and 0.052.
+MAX_BELOW_FRACTION = 0.03
 # Two planes are distinct when they map the bottom of the image (a 5 x 5 grid over the lowest
 # 40 % of the rows, where the ground is) more than this many pixels apart (median); closer
 # ones are the same plane refined differently (starts 1.8-11.8 px apart converge to the same
@@ -105,6 +117,11 @@ class Verdict:
     def score(self) -> float:
         """Return the verification score in [0, 1]."""
         return self.verification.score
+
+    @property
+    def peak_score(self) -> float:
+        """Return the verification's peak score in [0, 1] (ranks planes a few px apart)."""
+        return self.verification.peak_score
 
 
 class TrustGate:
@@ -177,11 +194,17 @@ class TrustGate:
             return Verdict(False, check, f'plane not verified: {check.reason} (score '
                            f'{check.score:.2f} < verification.min_score '
                            f'{self.settings.min_score:g})')
-        if check.bottom_score < MIN_BOTTOM_SCORE:
+        least = max(MIN_BOTTOM_SCORE, MIN_BOTTOM_SHARE * check.score)
+        if check.bottom_score < least:
             return Verdict(False, check, 'not the ground: the plane explains '
                            f'{100 * check.bottom_score:.0f} % of the bottom of the image '
-                           f'(< {100 * MIN_BOTTOM_SCORE:.0f} %); a plane through obstacles?',
+                           f'(< {100 * least:.0f} %); a plane through obstacles?',
                            ground=False)
+        if check.below_fraction > MAX_BELOW_FRACTION:
+            return Verdict(False, check, 'not the ground: '
+                           f'{100 * check.below_fraction:.0f} % of the textured image lies '
+                           f'beyond the plane (> {100 * MAX_BELOW_FRACTION:.0f} %); a plane '
+                           'through obstacles above the floor?', ground=False)
         lock = self.lock_score
         if locked and lock is not None and check.score < self.settings.drop_ratio * lock:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
@@ -212,15 +235,16 @@ class TrustGate:
              ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
         """Verify every estimate and return the best verified one, if it is unique.
 
-        Candidates are ranked by the verification score, not by the point energy: a plane one
-        tile or plank off can have the lower energy, never the higher score (measured on the
-        same pair). Planes within 0.5 px of one already judged are not verified again. The
-        best is published only if its score is at least :data:`CHALLENGE_MARGIN` times that
-        of every distinct plane judged (verified or not; walls and planes through obstacles do
-        not compete), of every plane of swapped cameras judged (distinct or not) and of every
-        plane of ``rivals``: (3, 3) homographies judged only as rivals, never published (the
-        swapped cameras' planes, :mod:`domplane_ros.stream.swap`), or a callable giving
-        them, called only once a plane is verified.
+        Candidates are ranked by the verification (its peak score), not by the point energy:
+        a plane one tile or plank off can have the lower energy, never the higher score
+        (measured on the same pair). Planes within 0.5 px of one already judged are not
+        verified again. The best is published only if its score is at least
+        :data:`CHALLENGE_MARGIN` times that of every distinct plane judged (verified or not;
+        walls and planes through obstacles do not compete), of every plane of swapped cameras
+        judged (distinct or not) and of every plane of ``rivals``: (3, 3) homographies judged
+        only as rivals, never published (the swapped cameras' planes,
+        :mod:`domplane_ros.stream.swap`), or a callable giving them, called only once a plane
+        is verified.
 
         Returns:
             The best verified estimate and its verdict (None, None if none verified or it is
@@ -247,7 +271,7 @@ class TrustGate:
             rival_planes = rivals() if callable(rivals) else rivals
             judged += [(None, rival, self.judge(left, right, rival, roi))
                        for rival in rival_planes or []]
-            best, best_h, verdict = max(verified, key=lambda item: item[2].score)
+            best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
                             if _rival(v, h, best_h, width, height)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
@@ -291,14 +315,19 @@ class TrustGate:
         for dx in (-step, 0.0, step):
             for dy in (-step, 0.0, step):
                 moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ homography
-                score = verify_plane(left, right, moved, config, roi).score
+                score = verify_plane(left, right, moved, config, roi).peak_score
                 if score > best_score:
                     best, best_score = moved / moved[2, 2], score
         return best
 
     def beats(self, challenger: Verdict, lock: Verdict) -> bool:
-        """Return whether a challenger explains clearly more of the image than the lock."""
-        return challenger.accepted and challenger.score > CHALLENGE_MARGIN * lock.score
+        """Return whether a challenger explains clearly more of the image than the lock.
+
+        Compared by the peak score: the challenger is often a plane a few pixels from the
+        lock, which the score's wider sideways probes tell apart less well.
+        """
+        return (challenger.accepted
+                and challenger.peak_score > CHALLENGE_MARGIN * lock.peak_score)
 
 
 def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,

@@ -48,6 +48,9 @@ def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
     assert not result.ok and 'swapped' in result.reason, result.reason
     monkeypatch.setattr(trust_module, '_rival', lambda verdict, h, best, width, height: (
         verdict.ground and trust_module._distinct(h, best, width, height)))
+    # The look-alike also sees texture beyond it (below_fraction): that check alone refuses
+    # it as well, so it is switched off here to show the rival's part.
+    monkeypatch.setattr(trust_module, 'MAX_BELOW_FRACTION', 1.0)
     without = _run(frame)
     assert without.ok and plane_error_px(frame, without.homography) > 5.0
 
@@ -56,7 +59,10 @@ def test_a_plane_through_boxes_is_not_the_ground(monkeypatch):
     frame = swapped(random_scene(61))
     result = _run(frame)
     assert not result.ok and 'not the ground' in result.reason, result.reason
+    # Each of the three ground checks refuses it alone (measured): all off, it is published.
     monkeypatch.setattr(trust_module, 'MIN_BOTTOM_SCORE', 0.0)
+    monkeypatch.setattr(trust_module, 'MIN_BOTTOM_SHARE', 0.0)
+    monkeypatch.setattr(trust_module, 'MAX_BELOW_FRACTION', 1.0)
     without = _run(frame)
     assert without.ok and plane_error_px(frame, without.homography) > 5.0
 
@@ -146,3 +152,38 @@ def test_the_swap_rivals_are_found_only_once_a_plane_is_verified(monkeypatch):
     result = _run(frame)
     assert result.ok and plane_error_px(frame, result.homography) < 1.0
     assert len(calls) == 1
+
+
+def _faint_both(seed):
+    """Return tuning seed ``seed``'s faint tiled floor and the pipeline evaluate_trust uses."""
+    from domplane_ros.config import one_shot_search
+    from domplane_ros.sim.textures import FAINT_TILE_KINDS
+    config = one_shot_search(PlaneNodeConfig())
+    config = replace(config, features=replace(config.features, kind='both'))
+    frame = random_scene(seed, floor=FAINT_TILE_KINDS[seed % len(FAINT_TILE_KINDS)])
+    return frame, PlanePipeline(config)
+
+
+@pytest.mark.parametrize('seed, name, off', [
+    # 1.28 m faint tiles: a plane through the faces of two boxes (6.6 px off the floor) sees
+    # the floor beyond it.
+    (305, 'MAX_BELOW_FRACTION', 1.0),
+    # A far wall's plane (8.1 px off the floor) explains the bottom of the image too little
+    # for its score.
+    (212, 'MIN_BOTTOM_SHARE', 0.0),
+])
+def test_a_plane_above_the_floor_is_not_the_ground(seed, name, off, monkeypatch):
+    frame, pipeline = _faint_both(seed)
+    result = pipeline.process(frame.left, frame.right, 0)
+    assert not result.ok or plane_error_px(frame, result.homography) < 5.0, result.reason
+    monkeypatch.setattr(trust_module, name, off)
+    frame, pipeline = _faint_both(seed)
+    without = pipeline.process(frame.left, frame.right, 0)
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+
+
+def test_nothing_lies_beyond_the_true_floor():
+    for seed in range(3):
+        scene = random_scene(seed)
+        check = verify_plane(scene.left, scene.right, scene.homography)
+        assert check.below_fraction < 0.2 * trust_module.MAX_BELOW_FRACTION, (seed, check)
