@@ -31,6 +31,7 @@ import functools
 from typing import Sequence
 
 import cv2
+from domplane_ros.core.scratch import scratch
 import numpy as np
 
 # Focal lengths tried between the prior's bounds (geometric spacing).
@@ -145,7 +146,8 @@ def infinity_shift(homography: np.ndarray, width: int, height: int,
     Returns:
         (h, w) float32 ``shift_inf`` in full-resolution pixels (module docstring): positive
         below the horizon, zero on it, negative above it; large negative where the pixel's ray
-        misses the plane at infinity in front of the camera.
+        misses the plane at infinity in front of the camera. A view of this thread's scratch
+        array (:mod:`domplane_ros.core.scratch`): valid until the next call.
 
     """
     h_inf = infinity_homography(homography, width, height, focal_px, principal_point_px)
@@ -156,16 +158,19 @@ def infinity_shift(homography: np.ndarray, width: int, height: int,
     # puts node i exactly there, and the extra node on each side covers the borders.
     grid_w, grid_h = (work_w + step - 1) // step + 2, (work_h + step - 1) // step + 2
     sx, sy = width / work_w, height / work_h
-    xs = ((np.arange(grid_w) - 0.5) * step - 0.5 + 0.5) * sx - 0.5
-    ys = ((np.arange(grid_h) - 0.5) * step - 0.5 + 0.5) * sy - 0.5
-    gx, gy = np.meshgrid(xs, ys)
-    num = to_inf[0, 0] * gx + to_inf[0, 1] * gy + to_inf[0, 2]
-    den = to_inf[2, 0] * gx + to_inf[2, 1] * gy + to_inf[2, 2]
-    with np.errstate(divide='ignore', invalid='ignore'):
-        shift = num / den - gx
-    shift = np.where((den > 1e-12) & np.isfinite(shift), shift, -_MAX_SHIFT_PX)
-    shift = np.clip(shift, -_MAX_SHIFT_PX, _MAX_SHIFT_PX).astype(np.float32)
-    dense = cv2.resize(shift, (grid_w * step, grid_h * step), interpolation=cv2.INTER_LINEAR)
+    xs = (((np.arange(grid_w) - 0.5) * step - 0.5 + 0.5) * sx - 0.5)[None, :]
+    ys = (((np.arange(grid_h) - 0.5) * step - 0.5 + 0.5) * sy - 0.5)[:, None]
+    num = to_inf[0, 0] * xs + (to_inf[0, 1] * ys + to_inf[0, 2])
+    den = to_inf[2, 0] * xs + (to_inf[2, 1] * ys + to_inf[2, 2])
+    if np.all(den > 1e-12):
+        shift = num / den - xs
+    else:
+        with np.errstate(divide='ignore', invalid='ignore'):
+            shift = num / den - xs
+        shift[(den <= 1e-12) | ~np.isfinite(shift)] = -_MAX_SHIFT_PX
+    shift = np.clip(shift, -_MAX_SHIFT_PX, _MAX_SHIFT_PX, out=shift).astype(np.float32)
+    dense = cv2.resize(shift, (grid_w * step, grid_h * step), interpolation=cv2.INTER_LINEAR,
+                       dst=scratch('infinity shift', (grid_h * step, grid_w * step)))
     return dense[step:step + work_h, step:step + work_w]
 
 

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 import dataclasses
 
 import cv2
 from domplane_ros.config import MaskConfig
-from domplane_ros.core import mask
+from domplane_ros.core import mask, residual
 from domplane_ros.sim.generators import indoor_scene, random_scene
 from domplane_ros.sim.model import Box, CameraSetup, StereoFrame
 from domplane_ros.sim.render import render_stereo
@@ -111,7 +112,7 @@ def test_coarse_flow_is_not_dragged_by_tall_objects(frames):
         warped, valid = mask._warp_to_left(left, right, hom, left.shape[::-1])
         ground = cv2.resize((frame.plane_left & frame.visible_in_right).astype(np.uint8),
                             left.shape[::-1], interpolation=cv2.INTER_NEAREST).astype(bool)
-        medians.append(float(np.median(np.abs(mask._flow_shift(left, warped)[ground & valid]))))
+        medians.append(float(np.median(np.abs(residual.flow_shift(left, warped)[ground & valid]))))
     assert max(medians) < 1.0, medians
 
 
@@ -211,21 +212,32 @@ def test_min_obstacle_height_decides_what_is_far(frames):
     assert high > low + 0.05, (low, high)
 
 
-def test_small_baseline_walls_and_furniture_are_not_plane():
+def test_small_baseline_walls_and_furniture_are_not_plane(monkeypatch):
     # 7.5 cm baseline at 1 m, walls 3-6 m away. Measured walls + furniture marked plane
-    # (min_obstacle_height 0.1): 9.6 %, 2.5 %, 2.8 %, 2.5 % on seeds 0-3 (the bottom few
-    # centimetres of walls and boxes show less than 1 px of parallax); with 0.05: <= 1.7 %.
-    # The NCC mask before it: 17 % in the median of 6 scenes.
-    shares = {0.1: [], 0.05: []}
-    for seed in range(3):
-        frame = indoor_scene(seed)
-        off_ground = ~frame.plane_left
-        for height, values in shares.items():
+    # (min_obstacle_height 0.1) on seeds 0-2: 8.9 %, 1.3 %, 1.9 %, and without the rule that
+    # plane pixels rising into an obstacle above are unknown 9.9 %, 2.5 %, 2.9 % (the bottom
+    # few centimetres of walls and boxes show less than 1 px of parallax); the visible ground
+    # marked plane 0.94, 0.86, 0.89 with the rule and 0.95, 0.87, 0.89 without. With 0.05:
+    # <= 1.0 %. The NCC mask before it: 17 % in the median of 6 scenes.
+    indoor = [indoor_scene(seed) for seed in range(3)]
+
+    def shares(height):
+        walls, ground = [], []
+        for frame in indoor:
             labels = mask.plane_mask(frame.left, frame.right, frame.homography,
                                      dataclasses.replace(CONFIG, min_obstacle_height=height))
-            values.append(float(np.mean(labels[off_ground] == mask.PLANE)))
-    assert max(shares[0.05]) < 0.025, shares
-    assert max(shares[0.1]) < 0.12 and np.median(shares[0.1]) < 0.035, shares
+            walls.append(float(np.mean(labels[~frame.plane_left] == mask.PLANE)))
+            seen = frame.plane_left & frame.visible_in_right
+            ground.append(float(np.mean(labels[seen] == mask.PLANE)))
+        return np.array(walls), np.array(ground)
+
+    walls, ground = shares(0.1)
+    assert max(walls) < 0.1 and np.median(walls) < 0.02, walls
+    assert max(shares(0.05)[0]) < 0.015
+    monkeypatch.setattr(mask, '_RISE_SHARE', np.inf)
+    walls_before, ground_before = shares(0.1)
+    assert np.all(walls < walls_before - 0.005), (walls, walls_before)
+    assert np.all(ground > ground_before - 0.01), (ground, ground_before)
 
 
 def test_parallax_image_is_measured_where_the_labels_are(frames):
@@ -418,3 +430,31 @@ def test_mask_scores_on_a_known_example():
     assert np.isnan(empty['obstacle_recall'])
     with pytest.raises(ValueError, match='plane_truth'):
         mask.mask_scores(labels, plane[:, :2], obstacle)
+
+
+def test_results_do_not_share_the_scratch_arrays_across_calls_or_threads(frames):
+    # The float images are reused between calls (core/scratch.py): a result must not change
+    # when the next mask is computed, and threads must not share the arrays.
+    first, second = frames[0], frames[3]
+    one = mask.parallax_mask(first.left, first.right, first.homography, CONFIG)
+    kept = (one.labels.copy(), one.parallax.copy())
+    two = mask.parallax_mask(second.left, second.right, second.homography, CONFIG)
+    assert np.array_equal(one.labels, kept[0]) and np.array_equal(one.parallax, kept[1])
+    assert not np.array_equal(one.labels, two.labels)
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        runs = list(pool.map(lambda f: mask.parallax_mask(f.left, f.right, f.homography, CONFIG),
+                             [first, second] * 4))
+    for run, alone in zip(runs, [one, two] * 4):
+        assert np.array_equal(run.labels, alone.labels)
+        assert np.array_equal(run.parallax, alone.parallax)
+
+
+@pytest.mark.parametrize('shape', [(240, 320), (7, 5), (1, 1)])
+def test_upsampling_by_two_is_nearest_neighbour(shape):
+    labels = np.random.default_rng(1).integers(0, 256, shape, dtype=np.uint8)
+    size = (2 * shape[1], 2 * shape[0])
+    expected = cv2.resize(labels, size, interpolation=cv2.INTER_NEAREST_EXACT)
+    assert np.array_equal(mask._upsample(labels, size), expected)
+    odd = (2 * shape[1] + 1, 2 * shape[0])
+    assert np.array_equal(mask._upsample(labels, odd),
+                          cv2.resize(labels, odd, interpolation=cv2.INTER_NEAREST_EXACT))
