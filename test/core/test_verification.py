@@ -217,3 +217,19 @@ def test_peak_score_ranks_planes_two_pixels_apart() -> None:
             other = verification.verify_plane(frame.left, frame.right, moved, config)
             assert truth.peak_score >= 1.2 * other.peak_score, (seed, dx, truth, other)
             assert other.peak_score <= other.score
+
+
+def test_every_homography_the_estimator_accepts_can_be_verified() -> None:
+    """A plane the estimator returned (held-out seed 4010's search) made verify_plane raise.
+
+    The two functions tested singularity differently (a determinant of the max-scaled matrix
+    against the estimator's singular-value ratio); now they share the estimator's test.
+    """
+    from domplane_ros.core.homography import check_homography
+    hom = np.array([[3.22132273e-02, -9.27123558e-01, 4.33942769e+02],
+                    [-4.51422144e-04, -9.20829545e-01, 4.50247087e+02],
+                    [-1.11347086e-06, -2.04836784e-03, 1.0]])
+    assert check_homography(hom) == ''
+    image = np.random.default_rng(0).integers(0, 255, (120, 160), dtype=np.uint8)
+    check = verification.verify_plane(image, image, hom)
+    assert not check.accepted and check.reason
