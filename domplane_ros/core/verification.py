@@ -261,11 +261,56 @@ def _ncc(a: np.ndarray, mean_a: np.ndarray, var_a: np.ndarray, b: np.ndarray,
     return cv2.divide(cov, denom)
 
 
-def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: VerificationConfig,
-          roi: tuple[float, float, float, float]) -> AgreementMaps:
+@dataclass(frozen=True)
+class WorkingPair:
+    """A pair shrunk to a verification's working width, to verify several planes on it.
+
+    Attributes:
+        left: (h, w) uint8 left image at the working width.
+        left_map: (3, 3) pixel map from the full left image to ``left``.
+        right: (h', w') uint8 right image at the working width.
+        right_map: (3, 3) pixel map from the full right image to ``right``.
+        full_shape: (H, W) of the full images.
+        width: The working width it was made for.
+    """
+
+    left: np.ndarray
+    left_map: np.ndarray
+    right: np.ndarray
+    right_map: np.ndarray
+    full_shape: tuple[int, int]
+    width: int
+
+
+def working_pair(left: np.ndarray, right: np.ndarray,
+                 config: VerificationConfig = VerificationConfig()) -> WorkingPair:
+    """Return the pair at ``config.working_width_px``, for :func:`verify_plane`'s ``working``.
+
+    Verifying several planes on one pair (a search's candidates) shrinks the images once.
+
+    Raises:
+        ValueError: As :func:`verify_plane` for the images.
+
+    """
+    left, right = _check_pair(left, right)
+    return _working(left, right, config)
+
+
+def _working(left: np.ndarray, right: np.ndarray, config: VerificationConfig) -> WorkingPair:
     left_small, scale_left = _shrink(left, config.working_width_px)
     right_small, scale_right = _shrink(right, int(round(
         config.working_width_px * right.shape[1] / left.shape[1])))
+    return WorkingPair(left_small, scale_left, right_small, scale_right,
+                       (int(left.shape[0]), int(left.shape[1])), int(config.working_width_px))
+
+
+def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: VerificationConfig,
+          roi: tuple[float, float, float, float],
+          working: WorkingPair | None = None) -> AgreementMaps:
+    if working is None:
+        working = _working(left, right, config)
+    left_small, scale_left = working.left, working.left_map
+    right_small, scale_right = working.right, working.right_map
     small_h, small_w = left_small.shape
     hom_small = scale_right @ hom @ np.linalg.inv(scale_left)
     size = (int(config.window_px), int(config.window_px))
@@ -338,7 +383,8 @@ def _check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
 
 def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                  config: VerificationConfig = VerificationConfig(),
-                 roi: Sequence[float] | None = None) -> PlaneVerification:
+                 roi: Sequence[float] | None = None,
+                 working: WorkingPair | None = None) -> PlaneVerification:
     """Verify a left-to-right plane homography by dense photometric agreement.
 
     See the module docstring for the method and the meaning of the score and confidence.
@@ -350,6 +396,8 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
         config: Settings.
         roi: Optional (x0, y0, x1, y1) region of the left image in fractions of its size
             (as ``features.roi``); default the whole image.
+        working: These images at the working width (:func:`working_pair`), if already
+            made; the result is the same.
 
     Returns:
         The :class:`PlaneVerification`; a failed check is a value with ``accepted`` False and
@@ -357,14 +405,19 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
 
     Raises:
         ValueError: If an image is not a non-empty (H, W) uint8 array, the sizes differ, the
-            homography is not a finite non-singular (3, 3) matrix or the roi is malformed.
+            homography is not a finite non-singular (3, 3) matrix, the roi is malformed or
+            ``working`` was made for another image size or working width.
 
     """
     start = time.perf_counter()
     left, right = _check_pair(left, right)
     hom = as_valid_homography(homography)
     region = _check_roi(roi)
-    maps = _maps(left, right, hom, config, region)
+    if working is not None and (working.full_shape != left.shape
+                                or working.width != config.working_width_px):
+        raise ValueError(f'working images made for {working.full_shape} at width '
+                         f'{working.width}, not {left.shape} at {config.working_width_px}')
+    maps = _maps(left, right, hom, config, region, working)
     return _verdict(maps, config, start, region)
 
 

@@ -186,7 +186,11 @@ class PlanePipeline:
         feats, track_pts, motions, carried, spans = self._features(*work)
         self.stats.carried += carried is not None
         t3 = time.perf_counter()
-        step = self._estimate(PairStep(left=left, right=right), feats, motions, fast)
+        self._trust.begin_pair(left, right)  # every plane of this pair shares one shrink
+        try:
+            step = self._estimate(PairStep(left=left, right=right), feats, motions, fast)
+        finally:
+            self._trust.end_pair()
         t4 = time.perf_counter()
         estimate, h, mask, parallax = self._publish(step, *work, feats)
         reason = '' if step.accepted else (step.reason or estimate.reason)

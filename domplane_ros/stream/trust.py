@@ -35,7 +35,8 @@ from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (PlaneVerification, swap_evidence,
-                                            VerificationConfig, verify_plane)
+                                            VerificationConfig, verify_plane, working_pair,
+                                            WorkingPair)
 import numpy as np
 
 # Least disparity slope (pixels per row, roll-invariant; see swap_evidence) of a ground plane
@@ -140,6 +141,30 @@ class TrustGate:
         self._coarse = CoarseAligner(CoarseConfig(width_px=settings.coarse_width_px))
         self._scores: deque[float] = deque(maxlen=history)
         self._locked_frames = 0
+        self._pair: tuple[np.ndarray, np.ndarray] | None = None
+        self._working: WorkingPair | None = None
+
+    def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
+        """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
+
+        Only for these very arrays, which must not change until then; planes judged on other
+        images are verified as without it. The results are the same either way.
+        """
+        self._pair, self._working = (left, right), None
+
+    def end_pair(self) -> None:
+        """Forget the pair of :meth:`begin_pair`."""
+        self._pair = self._working = None
+
+    def _verify(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                roi: Sequence[float] | None) -> PlaneVerification:
+        config = self.config(left.shape[1])
+        working = None
+        if self._pair is not None and self._pair[0] is left and self._pair[1] is right:
+            if self._working is None or self._working.width != config.working_width_px:
+                self._working = working_pair(left, right, config)
+            working = self._working
+        return verify_plane(left, right, homography, config, roi, working)
 
     def config(self, width: int) -> VerificationConfig:
         """Return the verification settings for images ``width`` pixels wide."""
@@ -178,7 +203,7 @@ class TrustGate:
             The :class:`Verdict`.
 
         """
-        check = verify_plane(left, right, homography, self.config(left.shape[1]), roi)
+        check = self._verify(left, right, homography, roi)
         height, width = left.shape
         swap = swap_evidence(homography, width, height)
         slope = swap.disparity_slope
@@ -315,7 +340,7 @@ class TrustGate:
         for dx in (-step, 0.0, step):
             for dy in (-step, 0.0, step):
                 moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ homography
-                score = verify_plane(left, right, moved, config, roi).peak_score
+                score = self._verify(left, right, moved, roi).peak_score
                 if score > best_score:
                     best, best_score = moved / moved[2, 2], score
         return best

@@ -164,8 +164,9 @@ def test_a_search_without_a_verified_plane_is_spread_over_frames(fast_sequence, 
     # The true planes of these obstacle-free floors score up to 0.89 (the highest min_score);
     # a stricter NCC threshold keeps every score below it.
     real = trust.verify_plane
-    monkeypatch.setattr(trust, 'verify_plane', lambda left, right, hom, config, roi: real(
-        left, right, hom, replace(config, ncc_threshold=0.99), roi))
+    monkeypatch.setattr(trust, 'verify_plane', lambda left, right, hom, config, roi,
+                        working=None: real(left, right, hom,
+                                           replace(config, ncc_threshold=0.99), roi, working))
     results = _run(PlanePipeline(_budget(budget, min_score=0.89)), fast_sequence[:8])
     refine_best = PlaneNodeConfig().prior.refine_best
     frames_per_search = -(-refine_best // budget)

@@ -9,6 +9,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import PlaneNodeConfig, VerificationSettings
+from domplane_ros.core import verification
 from domplane_ros.core.estimator import estimate_plane, TwoStep
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
@@ -245,3 +246,25 @@ def test_search_candidates_stop_early_and_the_published_winner_is_finished(monke
     configured = PlaneNodeConfig().estimator.tolerance_px
     assert tolerances.count(CANDIDATE_TOLERANCE_PX) >= result.candidates > 0
     assert tolerances[-1] == configured < CANDIDATE_TOLERANCE_PX
+
+
+def test_sharing_the_shrunk_pair_changes_no_verdict(scene):
+    gate = TrustGate(VerificationSettings())
+    planes = [scene.homography, _shifted(scene.homography, 2.0), _shifted(scene.homography, 30.0)]
+    alone = [gate.judge(scene.left, scene.right, h).verification for h in planes]
+    gate.begin_pair(scene.left, scene.right)
+    shared = [gate.judge(scene.left, scene.right, h).verification for h in planes]
+    assert gate._working is not None and gate._working.left.shape[1] == 160
+    # Other arrays (a copy) are verified as without the shared pair.
+    copy = gate.judge(scene.left.copy(), scene.right, planes[0]).verification
+    gate.end_pair()
+    assert gate._working is None
+    for a, b in zip(alone + alone[:1], shared + [copy]):
+        assert replace(a, time_ms=0.0) == replace(b, time_ms=0.0)
+
+
+def test_working_images_of_another_size_are_refused(scene):
+    working = verification.working_pair(scene.left, scene.right)
+    small = scene.left[:240, :320]
+    with pytest.raises(ValueError, match='working images made for'):
+        verification.verify_plane(small, small, np.eye(3), working=working)

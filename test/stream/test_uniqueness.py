@@ -102,8 +102,8 @@ def test_a_distinct_plane_scoring_alike_makes_the_best_ambiguous(scene, monkeypa
     moved = np.array([[1.0, 0.0, 30.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ scene.homography
     real = trust_module.verify_plane
 
-    def scored(left, right, homography, config, roi=None):
-        check = real(left, right, scene.homography, config, roi)
+    def scored(left, right, homography, config, roi=None, working=None):
+        check = real(left, right, scene.homography, config, roi, working)
         if np.allclose(homography, moved):
             return replace(check, score=0.9 * check.score)
         return check
@@ -112,10 +112,14 @@ def test_a_distinct_plane_scoring_alike_makes_the_best_ambiguous(scene, monkeypa
     best, verdict, reason = gate.pick(scene.left, scene.right, [true], rivals=[moved])
     assert best is None and verdict is None and 'ambiguous' in reason, reason
     # A rival at 0.7 of the score (1.43 x) leaves the truth unique, confidence above 0.5.
-    monkeypatch.setattr(trust_module, 'verify_plane', lambda left, right, h, config, roi=None: (
-        replace(real(left, right, scene.homography, config, roi),
-                score=0.7 * real(left, right, scene.homography, config, roi).score)
-        if np.allclose(h, moved) else real(left, right, h, config, roi)))
+
+    def scored_07(left, right, h, config, roi=None, working=None):
+        check = real(left, right, scene.homography, config, roi, working)
+        if np.allclose(h, moved):
+            return replace(check, score=0.7 * check.score)
+        return real(left, right, h, config, roi, working)
+
+    monkeypatch.setattr(trust_module, 'verify_plane', scored_07)
     best, verdict, reason = gate.pick(scene.left, scene.right, [true], rivals=[moved])
     assert best is true and verdict.uniqueness == pytest.approx(1 / 0.7)
     assert 0.5 < verdict.confidence <= verdict.verification.confidence
