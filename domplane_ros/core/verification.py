@@ -333,7 +333,8 @@ def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: Verifica
     warped_clean = np.maximum(warped, 0.0)
     ncc = _ncc(a, mean_a, var_a, warped_clean, size, min_var)
     probes = np.empty((len(PROBES),) + ncc.shape, np.float32)
-    shift_x, shift_y = float(config.epipolar_probe_shift_px), float(config.probe_shift_px)
+    # Wide sideways, narrow up and down; the peak score's sideways probes are narrow too.
+    wide, narrow = float(config.epipolar_probe_shift_px), float(config.probe_shift_px)
 
     def probe_ncc(dx: float, dy: float) -> np.ndarray:
         probe = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
@@ -342,7 +343,7 @@ def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: Verifica
         return _ncc(a, mean_a, var_a, moved, size, min_var)
 
     for index, (dx, dy) in enumerate(PROBES):
-        probes[index] = probe_ncc(dx * shift_x, dy * shift_y)
+        probes[index] = probe_ncc(dx * wide, dy * narrow)
     best_probe = probes.max(axis=0)
     inside = ~outside
     support = (textured & inside & (ncc >= config.ncc_threshold)
@@ -350,7 +351,7 @@ def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: Verifica
     peak_support = support.copy()
     for dx, dy in PEAK_PROBES:
         if support.any():
-            peak_support &= ncc >= probe_ncc(dx * shift_y, dy * shift_y) + config.peak_margin
+            peak_support &= ncc >= probe_ncc(dx * narrow, dy * narrow) + config.peak_margin
     return AgreementMaps(left=left_small,
                          warped=np.clip(warped_clean, 0, 255).astype(np.uint8), ncc=ncc,
                          probes=probes, best_probe=best_probe, textured=textured,

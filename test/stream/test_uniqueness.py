@@ -28,6 +28,14 @@ def _run(frame):
     return PlanePipeline().process(frame.left, frame.right, 0)
 
 
+def _wrong_without(frame, monkeypatch, *patches):
+    """Run the frame with each ``(module, name, value)`` patched: a wrong plane is published."""
+    for module, name, value in patches:
+        monkeypatch.setattr(module, name, value)
+    without = _run(frame)
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+
+
 @pytest.mark.parametrize('seed', [68, 115])
 def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypatch):
     # Tiles (68) and a checker of few corners (115: its swapped floor polished, not refined).
@@ -36,9 +44,8 @@ def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypat
     assert not result.ok and not result.mask.any() and result.confidence == 0.0
     assert 'swapped' in result.reason, result.reason
     # Without the swap's rivals a look-alike of the correctly ordered model is published.
-    monkeypatch.setattr(pipeline_module, 'swap_rivals', lambda *args, **kwargs: [])
-    without = _run(frame)
-    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+    _wrong_without(frame, monkeypatch,
+                   (pipeline_module, 'swap_rivals', lambda *args, **kwargs: []))
 
 
 def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
@@ -46,13 +53,12 @@ def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
     frame = swapped(random_scene(0))
     result = _run(frame)
     assert not result.ok and 'swapped' in result.reason, result.reason
-    monkeypatch.setattr(trust_module, '_rival', lambda verdict, h, best, width, height: (
-        verdict.ground and trust_module._distinct(h, best, width, height)))
     # The look-alike also sees texture beyond it (below_fraction): that check alone refuses
     # it as well, so it is switched off here to show the rival's part.
-    monkeypatch.setattr(trust_module, 'MAX_BELOW_FRACTION', 1.0)
-    without = _run(frame)
-    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+    _wrong_without(frame, monkeypatch,
+                   (trust_module, '_rival', lambda verdict, h, best, width, height: (
+                       verdict.ground and trust_module._distinct(h, best, width, height))),
+                   (trust_module, 'MAX_BELOW_FRACTION', 1.0))
 
 
 def test_a_plane_through_boxes_is_not_the_ground(monkeypatch):
@@ -60,11 +66,9 @@ def test_a_plane_through_boxes_is_not_the_ground(monkeypatch):
     result = _run(frame)
     assert not result.ok and 'not the ground' in result.reason, result.reason
     # Each of the three ground checks refuses it alone (measured): all off, it is published.
-    monkeypatch.setattr(trust_module, 'MIN_BOTTOM_SCORE', 0.0)
-    monkeypatch.setattr(trust_module, 'MIN_BOTTOM_SHARE', 0.0)
-    monkeypatch.setattr(trust_module, 'MAX_BELOW_FRACTION', 1.0)
-    without = _run(frame)
-    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+    _wrong_without(frame, monkeypatch, (trust_module, 'MIN_BOTTOM_SCORE', 0.0),
+                   (trust_module, 'MIN_BOTTOM_SHARE', 0.0),
+                   (trust_module, 'MAX_BELOW_FRACTION', 1.0))
 
 
 def test_the_true_floor_explains_the_bottom_of_the_image():
