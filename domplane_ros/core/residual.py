@@ -64,7 +64,8 @@ def _dis_flow() -> cv2.DISOpticalFlow:
     return flow
 
 
-def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
+def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
+              coarse: np.ndarray | None = None) -> LocalFit:
     """Return the one-step 1-D Lucas-Kanade shift and the zero-shift NCC of every window.
 
     With ``g`` the mean x gradient of both images and ``e`` the difference of the two
@@ -76,6 +77,9 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
         left: (h, w) uint8 left image at the working scale.
         warped: (h, w) uint8 right image warped into the left view.
         window: Side of the square window, pixels.
+        coarse: (h, w) float32 :func:`flow_shift` of the images if already measured (it is
+            global: the mask measures it on the whole images and fits only the rows it
+            needs); None to measure it here.
 
     Returns:
         The :class:`LocalFit`; its arrays are scratch arrays, valid until the next call.
@@ -107,7 +111,9 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
     den = _window_product(grad, grad, size, mean_b)
     den += np.float32(_REGULARISER)
     shift = cv2.divide(num, den, dst=num)
-    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=flow_shift(left, warped))
+    if coarse is None:
+        coarse = flow_shift(left, warped)
+    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse)
 
 
 def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int],
