@@ -134,22 +134,24 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray) 
 
     """
     coarse = fillable[::2, ::2].astype(np.uint8)
-    count, components = cv2.connectedComponents(coarse, connectivity=4)
+    # 16-bit ids straight away where no more than 65535 components fit (4-connected: at
+    # most one per two pixels and the background).
+    ltype = cv2.CV_16U if coarse.size <= 2 * 65534 else cv2.CV_32S
+    count, components = cv2.connectedComponents(coarse, connectivity=4, ltype=ltype)
     if count <= 1 or count >= 65535:
         return
+    components = components.astype(np.uint16, copy=False)
     # Each outline pixel (next to a component, not in one) votes for the largest and the
     # smallest neighbouring component id (both, when it lies between two components).
-    ids = components.astype(np.uint16)
     square = np.ones((3, 3), np.uint8)
-    largest = cv2.dilate(ids, square)
+    largest = cv2.dilate(components, square)
     # The smallest id by an erosion of id - 1, where 0 (no component) wraps to 65535.
-    ids -= np.uint16(1)
-    smallest = cv2.erode(ids, square, dst=ids)
+    smallest = cv2.erode(components - np.uint16(1), square)
     smallest += np.uint16(1)
-    outline = (largest > 0) & (components == 0) & valid[::2, ::2]
-    is_plane = labels[::2, ::2][outline] == PLANE
-    first = largest[outline].astype(np.int64)
-    second = smallest[outline].astype(np.int64)
+    outline = np.flatnonzero((largest > 0) & (components == 0) & valid[::2, ::2])
+    is_plane = np.ascontiguousarray(labels[::2, ::2]).ravel()[outline] == PLANE
+    first = largest.ravel()[outline].astype(np.int64)
+    second = smallest.ravel()[outline].astype(np.int64)
     second[second == first] = 0  # one vote per component
     total = np.bincount(first, minlength=count) + np.bincount(second, minlength=count)
     plane = (np.bincount(first, weights=is_plane, minlength=count)
@@ -231,11 +233,13 @@ def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
         if not np.all(np.isfinite(hom_small)):
             raise ValueError('homography is not invertible at mask scale')
         warped, valid = _warp_to_left(left_small, right_small, hom_small, (small_w, small_h))
+        halves = cv2.pyrDown(left_small), cv2.pyrDown(warped)
         # The coarse flow on the whole images (it is global: a cut would change it).
-        coarse = flow_shift(left_small, warped)
+        coarse = flow_shift(left_small, warped, halves)
         rows = slice(top, small_h)
         cut = _label_rows(left_small[rows], warped[rows], valid[rows], coarse[rows],
-                          shift_inf[rows], width / small_w, config)
+                          shift_inf[rows], width / small_w, config,
+                          (halves[0][top // 2:], halves[1][top // 2:]))
         if top == 0:
             labels, parallax = cut
         else:
@@ -262,8 +266,8 @@ def _first_row(shift_inf: np.ndarray) -> int | None:
 
 
 def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse: np.ndarray,
-                shift_inf: np.ndarray, px_per_working: float, config: MaskConfig
-                ) -> tuple[np.ndarray, np.ndarray]:
+                shift_inf: np.ndarray, px_per_working: float, config: MaskConfig,
+                halves: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Return the working-scale labels and parallax of the rows of ``left``.
 
     Args:
@@ -274,6 +278,7 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
         shift_inf: (h, w) float32 ground disparity relative to infinity, full pixels.
         px_per_working: Full-resolution pixels per working pixel along x.
         config: Mask settings.
+        halves: ``cv2.pyrDown`` of ``left`` and ``warped`` (from the whole images).
 
     Returns:
         (h, w) uint8 labels and (h, w) float32 parallax (:class:`ParallaxMask`).
@@ -285,7 +290,7 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
     _clean(labels, valid, decidable, int(config.morph_px))
     _unknown_below_obstacles(labels, rising)
-    hidden = occlusion_shadow(left, warped, labels == OBSTACLE)
+    hidden = occlusion_shadow(left, warped, labels == OBSTACLE, halves)
     _set_where(labels, UNKNOWN, hidden)
     _set_where(parallax, NOT_MEASURED, hidden)
     _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid)

@@ -80,8 +80,8 @@ def block_parallax(left: np.ndarray, warped: np.ndarray) -> np.ndarray | None:
     return matcher.compute(left, warped)
 
 
-def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
-                     ) -> np.ndarray:
+def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray,
+                     halves: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Return the obstacle pixels that are floor hidden from the right camera.
 
     Works at half the given size, on the rows holding obstacle pixels (and the matcher's
@@ -91,6 +91,10 @@ def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
         left: (h, w) uint8 left image at the mask's working scale.
         warped: (h, w) uint8 right image warped into the left view by the plane.
         obstacle: (h, w) bool pixels labelled obstacle.
+        halves: ``cv2.pyrDown`` of ``left`` and ``warped`` if the caller has them (the band's
+            rows are cut from them: they differ from a band reduced alone only in its first
+            and last half row, which the margin keeps away from every obstacle pixel's
+            match).
 
     Returns:
         (h, w) bool, a subset of ``obstacle``: in the shadow of an occluder to the right and
@@ -108,7 +112,11 @@ def occlusion_shadow(left: np.ndarray, warped: np.ndarray, obstacle: np.ndarray
     if bottom - top < 4 * _BLOCK_PX or width < 2 * (_DISPARITIES + _BLOCK_PX + 1):
         return shadow  # too small for the matcher
     band = slice(top, bottom)
-    half_left, half_warped = cv2.pyrDown(left[band]), cv2.pyrDown(warped[band])
+    if halves is None:
+        half_left, half_warped = cv2.pyrDown(left[band]), cv2.pyrDown(warped[band])
+    else:
+        half_band = slice(top // 2, (bottom + 1) // 2)
+        half_left, half_warped = halves[0][half_band], halves[1][half_band]
     parallax = block_parallax(half_left, half_warped)
     if parallax is None:
         return shadow

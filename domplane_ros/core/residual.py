@@ -123,11 +123,13 @@ def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int]
     return cv2.blur(out, size, dst=out)
 
 
-def flow_shift(left: np.ndarray, warped: np.ndarray) -> np.ndarray:
+def flow_shift(left: np.ndarray, warped: np.ndarray,
+               halves: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Return the signed x shift (working pixels) of DIS optical flow at half the working size.
 
     Only large parallax is read from it, so half the resolution serves and costs a quarter.
-    The result is a scratch array above the smallest sizes (module docstring).
+    ``halves`` are ``cv2.pyrDown`` of both images if the caller has them. The result is a
+    scratch array above the smallest sizes (module docstring).
     """
     height, width = left.shape
     if min(height, width) < _DIS_MIN_SIZE:
@@ -135,7 +137,7 @@ def flow_shift(left: np.ndarray, warped: np.ndarray) -> np.ndarray:
     if min(height, width) < 2 * _DIS_MIN_SIZE:
         flow = _dis_flow().calc(left, warped, None)
         return -flow[..., 0]
-    half_left, half_warped = cv2.pyrDown(left), cv2.pyrDown(warped)
+    half_left, half_warped = halves or (cv2.pyrDown(left), cv2.pyrDown(warped))
     # A fresh flow array: DIS starts from the content of one passed in.
     flow = _dis_flow().calc(half_left, half_warped, None)
     out = cv2.resize(cv2.extractChannel(flow, 0), (width, height),
