@@ -28,7 +28,8 @@ Three labels with a physical meaning:
 Obstacles are cleaned by a small opening and closing, plane gaps by a closing; unknown
 low-texture regions whose outline inside the right image is (almost) all plane, the plain
 interior of a tile, are filled as plane. The residual parallax itself is returned beside the
-labels.
+labels. Rows wholly above the horizon (less a margin) are unknown without being measured:
+no pixel there could be plane or obstacle, and the labels equal those of measuring them.
 """
 
 from __future__ import annotations
@@ -95,7 +96,8 @@ class ParallaxMask:
         labels: (H, W) uint8 left-image labels: 255 plane, 127 obstacle, 0 unknown.
         parallax: (h, w) float32 residual parallax magnitude at the mask's working scale,
             in full-resolution pixels; :data:`NOT_MEASURED` (-1) where it was not measured
-            (no texture, outside the right image, or too large for the one-step estimate).
+            (no texture, outside the right image, floor hidden from the right camera, rows
+            wholly above the plane's horizon).
     """
 
     labels: np.ndarray
