@@ -40,6 +40,10 @@ REFINE_NEAR_PX = 2.0
 REFINE_THRESHOLD_PX = 0.3
 REFINE_MIN_SAMPLES = 50
 
+# Images smaller than this on either side (at the working width) give no plane: the flow needs
+# a few pyramid levels of its patches (OpenCV's DIS refuses images under 12 px).
+MIN_SIZE_PX = 32
+
 _PRESETS = {'ultrafast': cv2.DISOPTICAL_FLOW_PRESET_ULTRAFAST,
             'fast': cv2.DISOPTICAL_FLOW_PRESET_FAST,
             'medium': cv2.DISOPTICAL_FLOW_PRESET_MEDIUM}
@@ -127,7 +131,8 @@ class CoarseAligner:
 
         Returns:
             (K, 3, 3) float64 homographies at full resolution, ``H[2, 2] == 1``; K is 0 when
-            the images give too few trustworthy flow samples.
+            the images give too few trustworthy flow samples or are smaller than
+            :data:`MIN_SIZE_PX` at the working width.
 
         Raises:
             ValueError: If the images are not 2-D uint8 arrays of the same size.
@@ -137,6 +142,8 @@ class CoarseAligner:
         cfg = self.config
         scale = min(1.0, cfg.width_px / left.shape[1])
         small_l, small_r = _reduce(left, scale), _reduce(right, scale)
+        if min(small_l.shape) < MIN_SIZE_PX:
+            return np.zeros((0, 3, 3))
         to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
         from_full = np.diag([scale, scale, 1.0])
         rows = small_l.shape[0]
@@ -165,8 +172,8 @@ class CoarseAligner:
                 part_src, part_dst = part_src[~inliers], part_dst[~inliers]
         return out
 
-    def refine(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray
-               ) -> np.ndarray | None:
+    def refine(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+               near_px: float = REFINE_NEAR_PX) -> np.ndarray | None:
         """Return a plane moved onto the dense flow that is left after warping by it.
 
         The right image is warped into the left view by ``homography`` and aligned to the left
@@ -181,10 +188,11 @@ class CoarseAligner:
             left: (H, W) uint8 left image.
             right: (H, W) uint8 right image (the same size).
             homography: (3, 3) float64 left-to-right plane homography.
+            near_px: Largest residual flow of the samples fitted, pixels at the working width.
 
         Returns:
-            (3, 3) float64 homography with ``H[2, 2] == 1``, or None if too few samples or no
-            model.
+            (3, 3) float64 homography with ``H[2, 2] == 1``, or None if too few samples, no
+            model or images smaller than :data:`MIN_SIZE_PX`.
 
         Raises:
             ValueError: If the images are not 2-D uint8 arrays of the same size.
@@ -193,6 +201,8 @@ class CoarseAligner:
         _check_pair(left, right)
         scale = min(1.0, self.config.width_px / left.shape[1])
         small_l, small_r = _reduce(left, scale), _reduce(right, scale)
+        if min(small_l.shape) < MIN_SIZE_PX:
+            return None
         to_small = np.diag([scale, scale, 1.0])
         to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
         h_small = to_small @ np.asarray(homography, np.float64) @ to_full
@@ -205,7 +215,7 @@ class CoarseAligner:
         src, dst = self._samples(small_l, warped, REFINE_STEP_PX,
                                  REFINE_MAX_FORWARD_BACKWARD_PX)
         rows, cols = src[:, 1].astype(np.intp), src[:, 0].astype(np.intp)
-        near = (np.hypot(*(dst - src).T) < REFINE_NEAR_PX) & covered[rows, cols]
+        near = (np.hypot(*(dst - src).T) < near_px) & covered[rows, cols]
         if np.count_nonzero(near) < REFINE_MIN_SAMPLES:
             return None
         fitted = _fit(src[near], dst[near], REFINE_THRESHOLD_PX)

@@ -38,7 +38,9 @@ class FrameResult:
         warm_start: Where this frame's estimate started: ``'prediction'`` (the last
             homography moved through the tracked camera motion), ``'last'`` (the last
             homography as is), ``'search'`` (prior candidates), ``'initial'`` (the
-            configured initial homography).
+            configured initial homography), ``'challenger'`` (a plane that beat the lock),
+            ``'photometric'`` (too few corners: the coarse alignment's or the prediction's
+            plane refined photometrically, no corner inliers).
         prediction: (3, 3) float64 predicted homography ``M_right H M_left^-1`` of this frame,
             or None when tracking gave none.
         candidates: Prior candidates refined in this frame (at most

@@ -24,7 +24,7 @@ from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
-from domplane_ros.stream.candidates import CandidateWork
+from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC
 from domplane_ros.stream.challenge import (Challenge, COARSE, PRIOR_START, PRIOR_STARTS,
                                            SCREEN)
 from domplane_ros.stream.detection import (carried_features, detect_features, full_mask,
@@ -249,7 +249,8 @@ class PlanePipeline:
                 parallax = np.where(parallax >= 0, parallax * np.float32(scale),
                                     parallax).astype(np.float32)
             self._last_h = h
-            self._last_energy_per_point = estimate.final_energy / max(feats.n_left, 1)
+            self._last_energy_per_point = (None if estimate.potential == PHOTOMETRIC else
+                                           estimate.final_energy / max(feats.n_left, 1))
             self.stats.succeeded += 1
         else:
             h = None
@@ -361,8 +362,25 @@ class PlanePipeline:
                 self._verified(step, estimate, verdict)
                 self._challenge_step(step, verdict, problem, feats, size, motions)
                 return
+        if reason and reason == self._checks.too_few_reason(feats) and self._photometric_lock(
+                step, prediction if prediction is not None else self._last_h, size):
+            return
         step.reason = reason
         self._lose_frame(step, prediction)
+
+    def _photometric_lock(self, step: PairStep, start: np.ndarray, size: tuple[int, int]
+                          ) -> bool:
+        """Too few corners while locked: publish the start refined photometrically if verified."""
+        planes = self._work().photometric_planes(step, [start], size)
+        if not planes:
+            return False
+        verdict = self._trust.judge(step.left, step.right, planes[0].homography,
+                                    self.config.features.roi, locked=True)
+        if not verdict.accepted:
+            return False
+        step.warm_start = PHOTOMETRIC
+        self._verified(step, planes[0], verdict)
+        return True
 
     def _warm_check(self, step: PairStep, estimate: PlaneEstimate | FailedEstimate,
                     feats: Features, size: tuple[int, int], fast: bool, count: bool
@@ -499,6 +517,13 @@ class PlanePipeline:
         reason = self._checks.too_few_reason(feats)
         if reason or isinstance(problem, FailedEstimate):
             step.reason = reason or problem.reason
+            planes = self._work().photometric_planes(
+                step, self._trust.coarse_candidates(step.left, step.right), size)
+            best, verdict, _ = self._trust.pick(step.left, step.right, planes,
+                                                self.config.features.roi)
+            if best is not None and verdict is not None:
+                step.warm_start = PHOTOMETRIC
+                self._verified(step, best, verdict)
             return
         pool, rejection, limit = self._search_pool(step, search, problem, feats, size, motions)
         self.stats.candidates += step.candidates

@@ -32,7 +32,7 @@ import statistics
 from typing import Callable, Sequence
 
 from domplane_ros.config import VerificationSettings
-from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
+from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (PlaneVerification, swap_evidence,
                                             VerificationConfig, verify_plane, working_pair,
@@ -255,10 +255,10 @@ class TrustGate:
             return np.zeros((0, 3, 3))
         return self._coarse.candidates(left, right, shifted)
 
-    def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray
-                ) -> np.ndarray | None:
+    def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                near_px: float = REFINE_NEAR_PX) -> np.ndarray | None:
         """Return the plane's photometric refinement (:meth:`CoarseAligner.refine`), unverified."""
-        return self._coarse.refine(left, right, homography)
+        return self._coarse.refine(left, right, homography, near_px)
 
     def challenge_due(self) -> bool:
         """Return whether the lock is challenged in this frame."""

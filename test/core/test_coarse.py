@@ -23,9 +23,12 @@ def test_candidates_come_near_the_truth_on_a_rough_rig(seed):
     assert min(plane_error_px(frame, h) for h in candidates) < 5.0
 
 
-def test_textureless_images_give_no_candidate():
+def test_textureless_or_tiny_images_give_no_candidate():
     flat = np.full((120, 160), 128, np.uint8)
     assert CoarseAligner().candidates(flat, flat).shape == (0, 3, 3)
+    noise = np.random.default_rng(0).integers(0, 256, (8, 200), np.uint8)
+    assert CoarseAligner().candidates(noise, noise).shape == (0, 3, 3)
+    assert CoarseAligner().refine(noise, noise, np.eye(3)) is None
 
 
 def test_bad_input_is_refused_naming_it():

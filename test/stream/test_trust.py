@@ -319,3 +319,29 @@ def test_a_biased_winner_is_moved_onto_the_floor_photometrically(monkeypatch):
     monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_MIN_GAIN', math.inf)
     without = PlanePipeline().process(frame.left, frame.right, 0)
     assert without.ok and plane_error_px(frame, without.homography) > 2.0
+
+
+def test_a_cut_to_a_floor_of_few_corners_relocks_photometrically(monkeypatch):
+    # After the cut a large checker seen close up shows 9-10 corners, fewer than
+    # estimator.min_inliers: the corners cannot fix a plane, the photometric refinement of
+    # the coarse alignment's planes (then of the prediction) can. Before, the cut never
+    # re-locked.
+    frames = cut_sequence(2, 6, 4)
+
+    def run():
+        pipeline = PlanePipeline()
+        results = [pipeline.process(f.left, f.right, i * PERIOD_NS)
+                   for i, f in enumerate(frames)]
+        return [plane_error_px(f, r.homography) if r.ok else None
+                for f, r in zip(frames, results)], results
+
+    errors, results = run()
+    after = errors[2:]
+    assert all(e is None or e < 1.0 for e in errors), errors
+    relock = next(i for i, e in enumerate(after) if e is not None)
+    assert relock < 3 and all(e is not None for e in after[relock:]), errors
+    assert all(r.warm_start == 'photometric' and r.estimate.n_inliers == 0
+               for r in results[2 + relock:])
+    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_ROUNDS', 0)
+    errors, _ = run()
+    assert all(e is None for e in errors[2:]), errors
