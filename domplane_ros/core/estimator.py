@@ -212,7 +212,9 @@ class TwoStep:
         aux = pred + (closest - pred) * (frac if self.n_lines == 0
                                          else frac[self.row_feature])[:, None]
         penalty = potential.penalty(r - s)
-        terms = self.feature_weight * (0.5 * s * s + penalty)
+        terms = 0.5 * s * s + penalty
+        if self.n_lines:  # points weigh 1
+            terms *= self.feature_weight
         return r, idx, aux, penalty, terms, closest
 
     def run_stage(self, h: np.ndarray, potential: Potential, options: EstimatorConfig,
@@ -226,7 +228,7 @@ class TwoStep:
         """
         pred = self.apply(h)
         r, idx, aux, penalty, terms, closest = self.local_step(pred, potential)
-        energy = float(np.sum(terms))
+        energy = float(terms.sum())
         energies.append(energy)
         weights = self.row_weight
         for it in range(1, options.max_iterations + 1):
@@ -241,19 +243,21 @@ class TwoStep:
             sq = np.einsum('ij,ij->i', diff, diff)
             if self.n_lines:
                 sq = np.bincount(self.row_feature, weights=sq, minlength=self.n_features)
-            old_terms = self.feature_weight * (0.5 * sq + penalty)
+            old_terms = 0.5 * sq + penalty
+            if self.n_lines:
+                old_terms *= self.feature_weight
             keep_old = old_terms < terms_new
             if np.any(keep_old):
                 keep_rows = keep_old[self.row_feature]
                 aux_new[keep_rows] = aux[keep_rows]
                 pen_new[keep_old] = penalty[keep_old]
                 terms_new = np.where(keep_old, old_terms, terms_new)
-            energy_new = float(np.sum(terms_new))
+            energy_new = float(terms_new.sum())
             if energy_new > energy * (1.0 + 1e-12):
                 # Both steps lower the energy in exact arithmetic; a near-degenerate fit (a
                 # handful of features) can break that numerically: the step is not taken.
                 return h, it, True, (pred, r, idx, closest)
-            move = float(np.max(np.abs(pred_new - pred))) if pred.size else 0.0
+            move = float(np.abs(pred_new - pred).max()) if pred.size else 0.0
             energies.append(energy_new)
             decrease = energy - energy_new
             h, pred, aux, penalty, energy = h_new, pred_new, aux_new, pen_new, energy_new

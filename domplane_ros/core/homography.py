@@ -463,13 +463,11 @@ class NormalisedRefiner:
         if np.abs(iw).min() < _MIN_W:
             return float('inf'), None
         iw = 1.0 / iw
-        px = uvw[:, 0] * iw
-        py = uvw[:, 1] * iw
-        rx = px - dst_n[:, 0]
-        ry = py - dst_n[:, 1]
-        sq = rx * rx + ry * ry
+        pxy = uvw[:, :2] * iw[:, None]
+        res = pxy - dst_n
+        sq = np.einsum('ij,ij->i', res, res)
         total = float(sq @ weights) if weights is not None else float(sq.sum())
-        return 0.5 * total / self.dst_scale ** 2, (iw, px, py)
+        return 0.5 * total / self.dst_scale ** 2, (iw, pxy[:, 0], pxy[:, 1])
 
     def refine(self, matrix: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None,
                iterations: int = 3, over_relaxation: float = 0.0
