@@ -28,7 +28,8 @@ Three labels with a physical meaning:
 Obstacles are cleaned by a small opening and closing, plane gaps by a closing; unknown
 low-texture regions whose outline inside the right image is (almost) all plane, the plain
 interior of a tile, are filled as plane. The residual parallax itself is returned beside the
-labels.
+labels. Rows wholly above the horizon (less a margin) are unknown without being measured:
+no pixel there could be plane or obstacle, and the labels equal those of measuring them.
 """
 
 from __future__ import annotations
@@ -43,7 +44,7 @@ from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
-from domplane_ros.core.residual import local_fit, LocalFit
+from domplane_ros.core.residual import flow_shift, local_fit, LocalFit
 from domplane_ros.core.scratch import constant
 import numpy as np
 
@@ -75,6 +76,9 @@ _FILL_MIN_OUTLINE = 4
 # so that every full-resolution pixel a working pixel covers maps inside too.
 _INSIDE_MARGIN_PX = 1.0
 _SQUARE_3 = np.ones((3, 3), np.uint8)
+# Rows kept above the first row below the horizon (working pixels; see _first_row): the
+# occlusion band's margin, the widest reach of the steps.
+_CUT_MARGIN_PX = 16
 # Translucency of the overlay tint.
 _TINT_ALPHA = 0.35
 # Colours of :func:`overlay` (RGB); core/legend.py names them.
@@ -92,7 +96,8 @@ class ParallaxMask:
         labels: (H, W) uint8 left-image labels: 255 plane, 127 obstacle, 0 unknown.
         parallax: (h, w) float32 residual parallax magnitude at the mask's working scale,
             in full-resolution pixels; :data:`NOT_MEASURED` (-1) where it was not measured
-            (no texture, outside the right image, or too large for the one-step estimate).
+            (no texture, outside the right image, floor hidden from the right camera, rows
+            wholly above the plane's horizon).
     """
 
     labels: np.ndarray
@@ -131,22 +136,24 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray) 
 
     """
     coarse = fillable[::2, ::2].astype(np.uint8)
-    count, components = cv2.connectedComponents(coarse, connectivity=4)
+    # 16-bit ids straight away where no more than 65535 components fit (4-connected: at
+    # most one per two pixels and the background).
+    ltype = cv2.CV_16U if coarse.size <= 2 * 65534 else cv2.CV_32S
+    count, components = cv2.connectedComponents(coarse, connectivity=4, ltype=ltype)
     if count <= 1 or count >= 65535:
         return
+    components = components.astype(np.uint16, copy=False)
     # Each outline pixel (next to a component, not in one) votes for the largest and the
     # smallest neighbouring component id (both, when it lies between two components).
-    ids = components.astype(np.uint16)
     square = np.ones((3, 3), np.uint8)
-    largest = cv2.dilate(ids, square)
+    largest = cv2.dilate(components, square)
     # The smallest id by an erosion of id - 1, where 0 (no component) wraps to 65535.
-    ids -= np.uint16(1)
-    smallest = cv2.erode(ids, square, dst=ids)
+    smallest = cv2.erode(components - np.uint16(1), square)
     smallest += np.uint16(1)
-    outline = (largest > 0) & (components == 0) & valid[::2, ::2]
-    is_plane = labels[::2, ::2][outline] == PLANE
-    first = largest[outline].astype(np.int64)
-    second = smallest[outline].astype(np.int64)
+    outline = np.flatnonzero((largest > 0) & (components == 0) & valid[::2, ::2])
+    is_plane = np.ascontiguousarray(labels[::2, ::2]).ravel()[outline] == PLANE
+    first = largest.ravel()[outline].astype(np.int64)
+    second = smallest.ravel()[outline].astype(np.int64)
     second[second == first] = 0  # one vote per component
     total = np.bincount(first, minlength=count) + np.bincount(second, minlength=count)
     plane = (np.bincount(first, weights=is_plane, minlength=count)
@@ -211,33 +218,85 @@ def parallax_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     focal = _check_focal(focal_px)
     height, width = left.shape
     left_small, scale_left = _resize(left, config.scale)
-    right_small, scale_right = _resize(right, config.scale)
     small_h, small_w = left_small.shape
-    hom_small = scale_right @ hom @ np.linalg.inv(scale_left)
-    if not np.all(np.isfinite(hom_small)):
-        raise ValueError('homography is not invertible at mask scale')
-    warped, valid = _warp_to_left(left_small, right_small, hom_small, (small_w, small_h))
-    fit = local_fit(left_small, warped, int(config.window_px))
-    # Full-resolution pixels per working pixel along x (the epipolar direction).
-    px_per_working = width / small_w
     # The camera model has one calibration for both cameras: a right image of another size
     # is brought to the left image's size first.
     right_h, right_w = right.shape
     same_size = resize_homography(width / right_w, height / right_h) @ hom
     shift_inf = infinity_shift(same_size, width, height, focal, (small_w, small_h),
                                principal_point_px)
+    top = _first_row(shift_inf)
+    if top is None or top > 0:
+        labels = np.zeros((small_h, small_w), np.uint8)
+        parallax = np.full((small_h, small_w), NOT_MEASURED, np.float32)
+    if top is not None:
+        right_small, scale_right = _resize(right, config.scale)
+        hom_small = scale_right @ hom @ np.linalg.inv(scale_left)
+        if not np.all(np.isfinite(hom_small)):
+            raise ValueError('homography is not invertible at mask scale')
+        warped, valid = _warp_to_left(left_small, right_small, hom_small, (small_w, small_h))
+        halves = cv2.pyrDown(left_small), cv2.pyrDown(warped)
+        # The coarse flow on the whole images (it is global: a cut would change it).
+        coarse = flow_shift(left_small, warped, halves)
+        rows = slice(top, small_h)
+        cut = _label_rows(left_small[rows], warped[rows], valid[rows], coarse[rows],
+                          shift_inf[rows], width / small_w, config,
+                          (halves[0][top // 2:], halves[1][top // 2:]))
+        if top == 0:
+            labels, parallax = cut
+        else:
+            labels[rows], parallax[rows] = cut
+    if (small_h, small_w) != (height, width):
+        labels = _upsample(labels, (width, height))
+    return ParallaxMask(labels=labels, parallax=parallax)
+
+
+def _first_row(shift_inf: np.ndarray) -> int | None:
+    """Return the first working row the mask needs, or None when no pixel is below the horizon.
+
+    At and above the plane's horizon (``shift_inf <= 0``) no pixel can be plane or obstacle
+    (:func:`_classify`), so rows wholly above it are unknown and not measured. The cut keeps
+    :data:`_CUT_MARGIN_PX` rows above the first row below the horizon (the windows, the
+    clean-up and the occlusion band reach that far) and starts on a multiple of it.
+    """
+    below = (shift_inf > 0).ravel()
+    first = int(np.argmax(below))  # the first pixel below the horizon, 0 if there is none
+    if not below[first]:
+        return None
+    row = first // shift_inf.shape[1]
+    return max(0, row - _CUT_MARGIN_PX) // _CUT_MARGIN_PX * _CUT_MARGIN_PX
+
+
+def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse: np.ndarray,
+                shift_inf: np.ndarray, px_per_working: float, config: MaskConfig,
+                halves: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    """Return the working-scale labels and parallax of the rows of ``left``.
+
+    Args:
+        left: (h, w) uint8 left image at the working scale (the rows the mask needs).
+        warped: (h, w) uint8 right image warped into the left view, the same rows.
+        valid: (h, w) bool pixels inside the right image.
+        coarse: (h, w) float32 coarse residual parallax (:func:`flow_shift`), working pixels.
+        shift_inf: (h, w) float32 ground disparity relative to infinity, full pixels.
+        px_per_working: Full-resolution pixels per working pixel along x.
+        config: Mask settings.
+        halves: ``cv2.pyrDown`` of ``left`` and ``warped`` (from the whole images).
+
+    Returns:
+        (h, w) uint8 labels and (h, w) float32 parallax (:class:`ParallaxMask`).
+
+    """
+    fit = local_fit(left, warped, int(config.window_px), coarse)
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config)
     rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
     _clean(labels, valid, decidable, int(config.morph_px))
     _unknown_below_obstacles(labels, rising)
-    hidden = occlusion_shadow(left_small, warped, labels == OBSTACLE)
+    hidden = occlusion_shadow(left, warped, labels == OBSTACLE, halves)
     _set_where(labels, UNKNOWN, hidden)
     _set_where(parallax, NOT_MEASURED, hidden)
     _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid)
-    if (small_h, small_w) != (height, width):
-        labels = _upsample(labels, (width, height))
-    return ParallaxMask(labels=labels, parallax=parallax)
+    return labels, parallax
 
 
 def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,

@@ -28,6 +28,7 @@ focal length is picked by how well the model fits.
 from __future__ import annotations
 
 import functools
+import math
 from typing import Sequence
 
 import cv2
@@ -42,25 +43,22 @@ _GRID_STEP = 8
 _MAX_SHIFT_PX = 1e4
 
 
-def _yaw(angle_rad: np.ndarray) -> np.ndarray:
-    """Return (N, 3, 3) rotations about the y axis (the prior's vergence)."""
-    c, s = np.cos(angle_rad), np.sin(angle_rad)
-    rot = np.zeros(angle_rad.shape + (3, 3))
-    rot[:, 0, 0], rot[:, 0, 2], rot[:, 1, 1], rot[:, 2, 0], rot[:, 2, 2] = c, s, 1.0, -s, c
-    return rot
+def _rotation_homography(focal: float, cx: float, cy: float, angle_rad: float) -> np.ndarray:
+    """Return the (3, 3) ``K R_v K^-1`` of a rotation about the y axis (the prior's vergence)."""
+    c, s = math.cos(angle_rad), math.sin(angle_rad)
+    k = np.array([[focal, 0.0, cx], [0.0, focal, cy], [0.0, 0.0, 1.0]])
+    rot = np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+    k_inv = np.array([[1.0 / focal, 0.0, -cx / focal], [0.0, 1.0 / focal, -cy / focal],
+                      [0.0, 0.0, 1.0]])
+    return k @ rot @ k_inv
 
 
 @functools.lru_cache(maxsize=16)
-def _intrinsics(cx: float, cy: float, low: float, high: float
-                ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the (N, 3, 3) calibration matrices of the sampled focal lengths and inverses."""
+def _focals(low: float, high: float) -> np.ndarray:
+    """Return the (N,) sampled focal lengths of a range (geometric spacing, read-only)."""
     focals = np.geomspace(low, max(high, low), _FOCAL_SAMPLES)
-    k = np.zeros((focals.size, 3, 3))
-    k[:, 0, 0], k[:, 1, 1], k[:, 0, 2], k[:, 1, 2], k[:, 2, 2] = focals, focals, cx, cy, 1.0
-    k_inv = np.linalg.inv(k)
-    k.flags.writeable = False
-    k_inv.flags.writeable = False
-    return k, k_inv
+    focals.flags.writeable = False
+    return focals
 
 
 def _principal_point(width: int, height: int, principal_point_px: Sequence[float]
@@ -96,37 +94,49 @@ def infinity_homography(homography: np.ndarray, width: int, height: int,
 
     """
     cx, cy = _principal_point(width, height, principal_point_px)
-    k, k_inv = _intrinsics(cx, cy, float(focal_px[0]), float(focal_px[1]))
-    misfit, scale, rot = _model_fit(homography, k, k_inv)
+    focals = _focals(float(focal_px[0]), float(focal_px[1]))
+    misfit, scale, angle = _model_fit(homography, focals, cx, cy)
     best = int(np.argmin(np.where(np.isfinite(misfit), misfit, np.inf)))
+    focal, vergence = float(focals[best]), float(angle[best])
     if 0 < best < misfit.size - 1 and np.all(np.isfinite(misfit[best - 1:best + 2])):
         # Parabola through the best sample and its neighbours (in log f): the vertex.
         low, mid, high = misfit[best - 1:best + 2]
         curvature = low - 2.0 * mid + high
         if curvature > 0:
             offset = 0.5 * (low - high) / curvature
-            ratio = k[best + 1, 0, 0] / k[best, 0, 0]
-            focal = k[best, 0, 0] * ratio ** float(np.clip(offset, -1.0, 1.0))
-            k1 = k[best:best + 1].copy()
-            k1[0, 0, 0] = k1[0, 1, 1] = focal
-            k1_inv = np.linalg.inv(k1)
-            _, scale1, rot1 = _model_fit(homography, k1, k1_inv)
-            return scale1[0] * (k1[0] @ rot1[0] @ k1_inv[0])
-    return scale[best] * (k[best] @ rot[best] @ k_inv[best])
+            ratio = focals[best + 1] / focals[best]
+            focal = float(focals[best] * ratio ** float(np.clip(offset, -1.0, 1.0)))
+            vergence = float(_model_fit(homography, np.array([focal]), cx, cy)[2][0])
+    return scale * _rotation_homography(focal, cx, cy, vergence)
 
 
-def _model_fit(homography: np.ndarray, k: np.ndarray, k_inv: np.ndarray
-               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the model's misfit, scale and vergence rotation for (N, 3, 3) calibrations."""
-    g = k_inv @ homography @ k
-    rot = _yaw(np.arctan2(-g[:, 2, 0], g[:, 0, 0]))
-    m = np.transpose(rot, (0, 2, 1)) @ g
-    scale = m[:, 1, 1].copy()
-    scale[np.abs(scale) < 1e-12] = 1e-12
-    m = m / scale[:, None, None]
-    misfit = (m[:, 1, 0] ** 2 + m[:, 1, 2] ** 2 + m[:, 2, 0] ** 2 + m[:, 2, 1] ** 2
-              + (m[:, 2, 2] - 1.0) ** 2 + (m[:, 0, 0] - 1.0) ** 2)
-    return misfit, scale, rot
+def _model_fit(homography: np.ndarray, focals: np.ndarray, cx: float, cy: float
+               ) -> tuple[np.ndarray, float, np.ndarray]:
+    """Return the model's misfit, scale and vergence angle for (N,) focal lengths.
+
+    ``G = K^-1 H K`` written out per entry (of ``G`` only the last row's first two entries
+    and the last column's first two depend on the focal length ``f``), so that the fit over
+    the samples is a few operations on (N,) arrays rather than (N, 3, 3) matrix products.
+    """
+    h = homography
+    column = h @ np.array([cx, cy, 1.0])  # H K's last column
+    g00, g01 = h[0, 0] - cx * h[2, 0], h[0, 1] - cx * h[2, 1]
+    g10, g11 = h[1, 0] - cy * h[2, 0], h[1, 1] - cy * h[2, 1]
+    g20, g21 = focals * h[2, 0], focals * h[2, 1]
+    g12 = (column[1] - cy * column[2]) / focals
+    g02 = (column[0] - cx * column[2]) / focals
+    g22 = column[2]
+    angle = np.arctan2(-g20, g00)
+    c, s = np.cos(angle), np.sin(angle)
+    # M = R_v^T G, divided by its scale M[1, 1] = G[1, 1].
+    scale = float(g11) if abs(g11) >= 1e-12 else 1e-12
+    m00 = (c * g00 - s * g20) / scale
+    m20 = (s * g00 + c * g20) / scale
+    m21 = (s * g01 + c * g21) / scale
+    m22 = (s * g02 + c * g22) / scale
+    misfit = ((g10 / scale) ** 2 + (g12 / scale) ** 2 + m20 ** 2 + m21 ** 2
+              + (m22 - 1.0) ** 2 + (m00 - 1.0) ** 2)
+    return misfit, scale, angle
 
 
 def infinity_shift(homography: np.ndarray, width: int, height: int,

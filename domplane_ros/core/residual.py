@@ -64,7 +64,8 @@ def _dis_flow() -> cv2.DISOpticalFlow:
     return flow
 
 
-def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
+def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
+              coarse: np.ndarray | None = None) -> LocalFit:
     """Return the one-step 1-D Lucas-Kanade shift and the zero-shift NCC of every window.
 
     With ``g`` the mean x gradient of both images and ``e`` the difference of the two
@@ -76,6 +77,9 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
         left: (h, w) uint8 left image at the working scale.
         warped: (h, w) uint8 right image warped into the left view.
         window: Side of the square window, pixels.
+        coarse: (h, w) float32 :func:`flow_shift` of the images if already measured (it is
+            global: the mask measures it on the whole images and fits only the rows it
+            needs); None to measure it here.
 
     Returns:
         The :class:`LocalFit`; its arrays are scratch arrays, valid until the next call.
@@ -107,7 +111,9 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int) -> LocalFit:
     den = _window_product(grad, grad, size, mean_b)
     den += np.float32(_REGULARISER)
     shift = cv2.divide(num, den, dst=num)
-    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=flow_shift(left, warped))
+    if coarse is None:
+        coarse = flow_shift(left, warped)
+    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse)
 
 
 def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int],
@@ -117,11 +123,13 @@ def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int]
     return cv2.blur(out, size, dst=out)
 
 
-def flow_shift(left: np.ndarray, warped: np.ndarray) -> np.ndarray:
+def flow_shift(left: np.ndarray, warped: np.ndarray,
+               halves: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Return the signed x shift (working pixels) of DIS optical flow at half the working size.
 
     Only large parallax is read from it, so half the resolution serves and costs a quarter.
-    The result is a scratch array above the smallest sizes (module docstring).
+    ``halves`` are ``cv2.pyrDown`` of both images if the caller has them. The result is a
+    scratch array above the smallest sizes (module docstring).
     """
     height, width = left.shape
     if min(height, width) < _DIS_MIN_SIZE:
@@ -129,7 +137,7 @@ def flow_shift(left: np.ndarray, warped: np.ndarray) -> np.ndarray:
     if min(height, width) < 2 * _DIS_MIN_SIZE:
         flow = _dis_flow().calc(left, warped, None)
         return -flow[..., 0]
-    half_left, half_warped = cv2.pyrDown(left), cv2.pyrDown(warped)
+    half_left, half_warped = halves or (cv2.pyrDown(left), cv2.pyrDown(warped))
     # A fresh flow array: DIS starts from the content of one passed in.
     flow = _dis_flow().calc(half_left, half_warped, None)
     out = cv2.resize(cv2.extractChannel(flow, 0), (width, height),

@@ -414,7 +414,7 @@ class PlanePipeline:
             return False
         if task.kind == COARSE:
             self._challenge.add_coarse_starts(
-                self._trust.coarse_candidates(step.left, step.right),
+                self._trust.coarse_candidates(step.left, step.right, shifted=False),
                 step.estimate.homography, size)
         elif task.kind == SCREEN:
             search = PriorSearch(problem, self._candidates(size),

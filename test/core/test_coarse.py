@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import plane_error_px, random_rig_error, RigError, rough_rig
@@ -14,7 +16,9 @@ def test_candidates_come_near_the_truth_on_a_rough_rig(seed):
     frame = rough_rig(random_scene(seed), RigError(roll_deg=-3.0, pitch_deg=1.0,
                                                    focal_ratio=0.97))
     candidates = CoarseAligner().candidates(frame.left, frame.right)
-    assert candidates.shape[1:] == (3, 3) and 1 <= candidates.shape[0] <= 6
+    config = CoarseConfig()
+    most = 2 * len(config.lower_parts) * config.planes_per_part  # plain and shifted flow
+    assert candidates.shape[1:] == (3, 3) and 1 <= candidates.shape[0] <= most
     assert np.all(np.isfinite(candidates))
     assert min(plane_error_px(frame, h) for h in candidates) < 5.0
 
@@ -43,6 +47,20 @@ def test_a_second_fit_per_part_finds_a_floor_hidden_by_the_first(seed):
     assert min(plane_error_px(frame, h) for h in both) < 3.0
 
 
-def test_planes_per_part_is_checked():
+def test_planes_per_part_and_min_shift_are_checked():
     with pytest.raises(ValueError, match='planes_per_part'):
         CoarseConfig(planes_per_part=0)
+    with pytest.raises(ValueError, match='min_shift_px'):
+        CoarseConfig(min_shift_px=0.0)
+
+
+@pytest.mark.parametrize('seed', [5, 27])
+def test_a_shifted_alignment_follows_a_disparity_the_flow_cannot(seed):
+    # The floor's disparity exceeds 100 px at 640 px wide: the flow alone follows the far
+    # field (every candidate > 25 px off); aligned again after the lower half's dominant
+    # shift, it finds the floor.
+    frame = rough_rig(random_scene(seed), random_rig_error(np.random.default_rng((seed, 77))))
+    plain = CoarseAligner(CoarseConfig(min_shift_px=math.inf))
+    assert min(plane_error_px(frame, h) for h in plain.candidates(frame.left, frame.right)) > 25
+    shifted = CoarseAligner().candidates(frame.left, frame.right)
+    assert min(plane_error_px(frame, h) for h in shifted) < 3.0

@@ -183,6 +183,36 @@ def test_above_the_horizon_is_never_plane():
     assert near > 0.85 and band > 0.9, (near, band)
 
 
+def test_rows_above_the_horizon_are_cut_without_changing_the_labels(monkeypatch):
+    # The horizon at row 196 (working row 98): the mask measures from working row 80 (16
+    # rows of margin, on a multiple of 16); above it nothing is measured. Measuring every
+    # row (the cut disabled) gives the same labels.
+    setup = CameraSetup(500.0, 0.2, 5.0, 0.0, 320 * 2, 240 * 2)
+    frame = render_stereo(setup, (Box(0.3, 4.0, 0.6, 0.6, 1.6),), floor='random', seed=3,
+                          background='wall', wall_distance=8.0)
+    cut = mask.parallax_mask(frame.left, frame.right, frame.homography, CONFIG)
+    monkeypatch.setattr(mask, '_first_row', lambda shift_inf: 0)
+    whole = mask.parallax_mask(frame.left, frame.right, frame.homography, CONFIG)
+    assert np.array_equal(cut.labels, whole.labels)
+    assert np.any(whole.labels == mask.OBSTACLE) and np.any(whole.labels == mask.PLANE)
+    assert np.all(cut.parallax[:80] == mask.NOT_MEASURED)
+    assert np.mean(whole.parallax[:80] >= 0.0) > 0.5  # the wall is textured: measured
+    assert np.array_equal(cut.parallax[96:], whole.parallax[96:])
+
+
+def test_a_view_wholly_above_the_horizon_is_unknown_and_not_measured():
+    # A head tilted 30 degrees up: the ground's horizon lies below the image.
+    k = np.array([[500.0, 0.0, 319.5], [0.0, 500.0, 239.5], [0.0, 0.0, 1.0]])
+    tilt = np.radians(-30.0)
+    plane = np.eye(3) - np.outer([0.2, 0.0, 0.0], [0.0, np.cos(tilt), np.sin(tilt)])
+    homography = k @ plane @ np.linalg.inv(k)
+    rng = np.random.default_rng(4)
+    left = rng.integers(0, 256, (480, 640), dtype=np.uint8)
+    out = mask.parallax_mask(left, left, homography, CONFIG)
+    assert not np.any(out.labels) and np.all(out.parallax == mask.NOT_MEASURED)
+    assert out.labels.shape == (480, 640) and out.parallax.shape == (240, 320)
+
+
 def test_min_obstacle_height_decides_what_is_far(frames):
     # Physical meaning: a pixel is plane only where an obstacle of the minimum height would
     # show at least the threshold, kappa * (ground disparity relative to infinity) >= 1 px.

@@ -94,3 +94,32 @@ def test_random_input_gives_a_subset_of_the_obstacles(seed):
     shadow = occlusion.occlusion_shadow(left, warped, obstacle)
     assert shadow.shape == (height, width) and shadow.dtype == bool
     assert not np.any(shadow & ~obstacle)
+
+
+def test_half_images_given_give_the_same_shadow():
+    # The mask reduces the whole images once and hands the band's rows over: the rows next to
+    # the band's edges differ from a band reduced alone, the shadow may not.
+    for parallax in (8, 24):
+        left, warped = _box_scene(3, parallax)
+        obstacle = np.zeros((HEIGHT, WIDTH), bool)
+        obstacle[TOP:BOTTOM, LEFT_EDGE - parallax:RIGHT_EDGE] = True
+        alone = occlusion.occlusion_shadow(left, warped, obstacle)
+        given = occlusion.occlusion_shadow(left, warped, obstacle,
+                                           (cv2.pyrDown(left), cv2.pyrDown(warped)))
+        assert alone.any() and np.array_equal(alone, given)
+
+
+def test_row_sums_and_minima_ahead_equal_numpy():
+    rng = np.random.default_rng(5)
+    mask = rng.random((37, 91)) < 0.4
+    assert np.array_equal(occlusion._row_cumsum(mask), np.cumsum(mask, axis=1))
+    values = rng.integers(-5000, 5000, (37, 91)).astype(np.int32)
+    values[rng.random(values.shape) < 0.7] = 1 << 30  # no occluder
+    ahead = occlusion._min_ahead(values, 10)
+    running = np.minimum.accumulate(values[:, ::-1], axis=1)[:, ::-1]
+    for row in range(values.shape[0]):
+        for column in range(values.shape[1]):
+            window = values[row, column:column + 11]
+            assert ahead[row, column] == window.min()
+            if running[row, column] in window:  # the minimum lies within reach: the same
+                assert ahead[row, column] == running[row, column]

@@ -11,6 +11,7 @@ from dataclasses import replace
 import math
 
 from domplane_ros.config import PlaneNodeConfig, VerificationSettings
+from domplane_ros.core.coarse import CoarseAligner
 from domplane_ros.core.estimator import estimate_plane
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.verification import verify_plane
@@ -181,6 +182,11 @@ def _faint_both(seed):
     (212, 'MIN_BOTTOM_SHARE', 0.0),
 ])
 def test_a_plane_above_the_floor_is_not_the_ground(seed, name, off, monkeypatch):
+    # The plain coarse alignment only: on seed 305 the shifted one adds a plane 4 px off the
+    # floor that outranks the plane through the boxes, which would hide the check's part.
+    plain = CoarseAligner.candidates
+    monkeypatch.setattr(CoarseAligner, 'candidates',
+                        lambda self, left, right, shifted=True: plain(self, left, right, False))
     frame, pipeline = _faint_both(seed)
     result = pipeline.process(frame.left, frame.right, 0)
     assert not result.ok or plane_error_px(frame, result.homography) < 5.0, result.reason
