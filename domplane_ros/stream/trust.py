@@ -255,6 +255,11 @@ class TrustGate:
             return np.zeros((0, 3, 3))
         return self._coarse.candidates(left, right, shifted)
 
+    def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray
+                ) -> np.ndarray | None:
+        """Return the plane's photometric refinement (:meth:`CoarseAligner.refine`), unverified."""
+        return self._coarse.refine(left, right, homography)
+
     def challenge_due(self) -> bool:
         """Return whether the lock is challenged in this frame."""
         period = self.settings.challenge_period

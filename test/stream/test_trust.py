@@ -7,6 +7,7 @@ Every configuration here is the documented default (no prior built from a scene'
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 
 from domplane_ros.config import PlaneNodeConfig, VerificationSettings
 from domplane_ros.core import verification
@@ -14,7 +15,8 @@ from domplane_ros.core.estimator import estimate_plane, TwoStep
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
 from domplane_ros.sim.generators import random_scene
-from domplane_ros.sim.rigs import cut_sequence, plane_error_px, RigError, rough_rig, swapped
+from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, RigError,
+                                   rough_rig, swapped)
 from domplane_ros.stream import candidates as candidates_module
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.candidates import CANDIDATE_TOLERANCE_PX, CandidateWork
@@ -286,6 +288,8 @@ def test_the_published_winner_is_polished_on_its_closest_features(monkeypatch, s
         return out
 
     monkeypatch.setattr(CandidateWork, 'tightened', spy)
+    # The photometric refinement that follows is off here (tested on its own below).
+    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_MIN_GAIN', math.inf)
     frame = random_scene(seed)
     result = PlanePipeline().process(frame.left, frame.right, 0)
     assert result.ok, result.reason
@@ -302,3 +306,16 @@ def test_the_published_winner_is_polished_on_its_closest_features(monkeypatch, s
     result = PlanePipeline().process(frame.left, frame.right, 0)
     assert result.ok and seen[-1][1] is seen[-1][0]
     assert plane_error_px(frame, result.homography) == pytest.approx(unpolished, abs=1e-6)
+
+
+def test_a_biased_winner_is_moved_onto_the_floor_photometrically(monkeypatch):
+    # A planked floor on a rough rig (tuning seed 15): every start, coarse ones 0.6 px from
+    # the truth included, converges 2.5 px off it (the corners' closest-point fit is biased
+    # on planks); the photometric refinement raises the peak score by 70 % and lands within
+    # a pixel. Without it the plane is published 2.5 px off.
+    frame = rough_rig(random_scene(15), random_rig_error(np.random.default_rng((15, 77))))
+    result = PlanePipeline().process(frame.left, frame.right, 0)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
+    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_MIN_GAIN', math.inf)
+    without = PlanePipeline().process(frame.left, frame.right, 0)
+    assert without.ok and plane_error_px(frame, without.homography) > 2.0
