@@ -81,6 +81,8 @@ FAR_SUPPORT_RATIO = 2.5
 FAR_SHIFT_THRESHOLDS = 4.0
 # With at least this many points, the far-start test looks at about this many of them.
 FAR_SAMPLE_POINTS = 128
+# The start itself, then its shifts right, left, down and up (times the shift).
+_FAR_OFFSETS = np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 
 
 def can_widen(options: EstimatorConfig) -> bool:
@@ -163,7 +165,7 @@ class TwoStep:
     def apply(self, h: np.ndarray) -> np.ndarray:
         """Return the (rows, 2) predictions of every row under ``h``."""
         uvw = self.src_h @ h.T
-        if uvw.shape[0] == 0 or np.min(np.abs(uvw[:, 2])) < MIN_W:
+        if uvw.shape[0] == 0 or np.abs(uvw[:, 2]).min() < MIN_W:
             return apply_homography(h, self.src)
         return uvw[:, :2] / uvw[:, 2:3]
 
@@ -177,6 +179,11 @@ class TwoStep:
         -1 and its own prediction as closest position (the query stops early there).
         """
         n = self.n_points
+        if n and not self.n_lines:
+            r, idx, closest = self.nearest.query_closest(pred, bound)
+            far = np.flatnonzero(idx < 0)
+            closest[far] = pred[far]
+            return r, idx, closest
         r = np.empty(self.n_features)
         idx = np.empty(self.n_features, np.int64)
         closest = np.empty_like(pred)
@@ -205,7 +212,9 @@ class TwoStep:
         aux = pred + (closest - pred) * (frac if self.n_lines == 0
                                          else frac[self.row_feature])[:, None]
         penalty = potential.penalty(r - s)
-        terms = self.feature_weight * (0.5 * s * s + penalty)
+        terms = 0.5 * s * s + penalty
+        if self.n_lines:  # points weigh 1
+            terms *= self.feature_weight
         return r, idx, aux, penalty, terms, closest
 
     def run_stage(self, h: np.ndarray, potential: Potential, options: EstimatorConfig,
@@ -219,7 +228,7 @@ class TwoStep:
         """
         pred = self.apply(h)
         r, idx, aux, penalty, terms, closest = self.local_step(pred, potential)
-        energy = float(np.sum(terms))
+        energy = float(terms.sum())
         energies.append(energy)
         weights = self.row_weight
         for it in range(1, options.max_iterations + 1):
@@ -234,19 +243,21 @@ class TwoStep:
             sq = np.einsum('ij,ij->i', diff, diff)
             if self.n_lines:
                 sq = np.bincount(self.row_feature, weights=sq, minlength=self.n_features)
-            old_terms = self.feature_weight * (0.5 * sq + penalty)
+            old_terms = 0.5 * sq + penalty
+            if self.n_lines:
+                old_terms *= self.feature_weight
             keep_old = old_terms < terms_new
             if np.any(keep_old):
                 keep_rows = keep_old[self.row_feature]
                 aux_new[keep_rows] = aux[keep_rows]
                 pen_new[keep_old] = penalty[keep_old]
                 terms_new = np.where(keep_old, old_terms, terms_new)
-            energy_new = float(np.sum(terms_new))
+            energy_new = float(terms_new.sum())
             if energy_new > energy * (1.0 + 1e-12):
                 # Both steps lower the energy in exact arithmetic; a near-degenerate fit (a
                 # handful of features) can break that numerically: the step is not taken.
                 return h, it, True, (pred, r, idx, closest)
-            move = float(np.max(np.abs(pred_new - pred))) if pred.size else 0.0
+            move = float(np.abs(pred_new - pred).max()) if pred.size else 0.0
             energies.append(energy_new)
             decrease = energy - energy_new
             h, pred, aux, penalty, energy = h_new, pred_new, aux_new, pen_new, energy_new
@@ -370,10 +381,12 @@ class TwoStep:
             # Points only, an evenly strided sample: a fraction of a warm run's cost.
             step = max(1, self.n_points // FAR_SAMPLE_POINTS)
             pred = apply_homography(h, self.left[::step])
-
-            def supported(p: np.ndarray) -> float:
-                return float(np.mean(self.tree.query(
-                    p, distance_upper_bound=threshold_px)[0] < threshold_px))
+            # The start and its four shifts in one tree query (each point's answer is its own).
+            shift = FAR_SHIFT_THRESHOLDS * threshold_px
+            near = (self.tree.query(pred[None] + _FAR_OFFSETS[:, None] * shift,
+                                    distance_upper_bound=threshold_px)[0] < threshold_px)
+            support = near.mean(axis=1)
+            return bool(support[0] < FAR_SUPPORT_RATIO * np.mean(support[1:]))
         else:
             pred = self.apply(h)
 

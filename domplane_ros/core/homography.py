@@ -141,9 +141,15 @@ def check_homography(matrix: np.ndarray) -> str:
     return ''
 
 
+def _norm(array: np.ndarray) -> float:
+    """Return the Frobenius norm of a float64 array, as ``np.linalg.norm`` computes it."""
+    flat = array.ravel()
+    return math.sqrt(float(flat.dot(flat)))
+
+
 def normalise_scale(matrix: np.ndarray) -> np.ndarray:
     """Scale a homography so that ``H[2, 2] == 1``, or to unit Frobenius norm if that is ~0."""
-    norm = np.linalg.norm(matrix)
+    norm = _norm(matrix)
     if abs(matrix[2, 2]) > 1e-12 * norm:
         return matrix / matrix[2, 2]
     return matrix / norm
@@ -351,6 +357,31 @@ def fit_homography_dlt(src: np.ndarray, dst: np.ndarray,
     return normalise_scale(h)
 
 
+def _normal_layout() -> tuple[np.ndarray, np.ndarray]:
+    """Return where ``J^T W J``'s 81 entries are in the flat 3x3 blocks ``[a, b, c, d, 0]``.
+
+    With ``a = sum m m^T``, ``b = sum px m m^T``, ``c = sum py m m^T`` and
+    ``d = sum (px^2 + py^2) m m^T`` (weighted), ``J^T W J = [[a, 0, -b], [0, a, -c],
+    [-b^T, -c^T, d]]``: the flat index into ``concatenate(a, b, c, d, [0])`` (each block
+    row-major) and the sign of every entry.
+    """
+    index = np.full((9, 9), 36, np.int64)
+    sign = np.ones((9, 9))
+    block = np.arange(9).reshape(3, 3)
+    for rows, cols, first, transposed, negative in (
+            (0, 0, 0, False, False), (3, 3, 0, False, False), (0, 6, 9, False, True),
+            (6, 0, 9, True, True), (3, 6, 18, False, True), (6, 3, 18, True, True),
+            (6, 6, 27, False, False)):
+        index[rows:rows + 3, cols:cols + 3] = first + (block.T if transposed else block)
+        sign[rows:rows + 3, cols:cols + 3] = -1.0 if negative else 1.0
+    return index.ravel(), sign.ravel()
+
+
+_NORMAL_INDEX, _NORMAL_SIGN = _normal_layout()
+_GRAD_SIGN = np.array([1.0, 1.0, 1.0, 1.0, 1.0, 1.0, -1.0, -1.0, -1.0])
+_DIAGONAL = np.arange(0, 81, 10)
+
+
 def _normal_equations(m: np.ndarray, px: np.ndarray, py: np.ndarray, dst_n: np.ndarray,
                       weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
     """Return Gauss-Newton's ``(J^T W J, J^T W r)`` (9 x 9, 9) of the transfer residuals.
@@ -378,16 +409,11 @@ def _normal_equations(m: np.ndarray, px: np.ndarray, py: np.ndarray, dst_n: np.n
     cols[:, 13] = ry
     cols[:, 14] = px * rx + py * ry
     prod = mw.T @ cols
-    a, b, c, d = prod[:, 0:3], prod[:, 3:6], prod[:, 6:9], prod[:, 9:12]
-    normal = np.zeros((9, 9))
-    normal[0:3, 0:3] = a
-    normal[3:6, 3:6] = a
-    normal[0:3, 6:9] = -b
-    normal[6:9, 0:3] = -b.T
-    normal[3:6, 6:9] = -c
-    normal[6:9, 3:6] = -c.T
-    normal[6:9, 6:9] = d
-    grad = np.concatenate([prod[:, 12], prod[:, 13], -prod[:, 14]])
+    flat = np.empty(37)
+    flat[:36] = prod[:, :12].reshape(3, 4, 3).transpose(1, 0, 2).ravel()
+    flat[36] = 0.0
+    normal = (flat[_NORMAL_INDEX] * _NORMAL_SIGN).reshape(9, 9)
+    grad = prod[:, 12:15].T.ravel() * _GRAD_SIGN
     return normal, grad
 
 
@@ -420,7 +446,7 @@ class NormalisedRefiner:
     def to_normalised(self, matrix: np.ndarray) -> np.ndarray:
         """Return ``T_dst H T_src^-1`` with unit Frobenius norm."""
         g = self.t_dst @ matrix @ self.t_src_inv
-        return g / np.linalg.norm(g)
+        return g / _norm(g)
 
     def from_normalised(self, g: np.ndarray) -> np.ndarray:
         """Return the pixel homography ``T_dst^-1 G T_src`` scaled so ``H[2, 2] == 1``."""
@@ -434,16 +460,14 @@ class NormalisedRefiner:
         """
         uvw = self.src_h @ g.T
         iw = uvw[:, 2]
-        if np.min(np.abs(iw)) < _MIN_W:
+        if np.abs(iw).min() < _MIN_W:
             return float('inf'), None
         iw = 1.0 / iw
-        px = uvw[:, 0] * iw
-        py = uvw[:, 1] * iw
-        rx = px - dst_n[:, 0]
-        ry = py - dst_n[:, 1]
-        sq = rx * rx + ry * ry
-        total = float(sq @ weights) if weights is not None else float(np.sum(sq))
-        return 0.5 * total / self.dst_scale ** 2, (iw, px, py)
+        pxy = uvw[:, :2] * iw[:, None]
+        res = pxy - dst_n
+        sq = np.einsum('ij,ij->i', res, res)
+        total = float(sq @ weights) if weights is not None else float(sq.sum())
+        return 0.5 * total / self.dst_scale ** 2, (iw, pxy[:, 0], pxy[:, 1])
 
     def refine(self, matrix: np.ndarray, dst: np.ndarray, weights: np.ndarray | None = None,
                iterations: int = 3, over_relaxation: float = 0.0
@@ -478,7 +502,7 @@ class NormalisedRefiner:
             gvec = g.ravel()
             # J g = 0 (scale gauge); adding g g^T fixes the scale and makes the system regular.
             normal += np.outer(gvec, gvec)
-            normal[np.diag_indices(9)] *= 1.0 + 1e-9
+            normal.flat[_DIAGONAL] *= 1.0 + 1e-9
             try:
                 step = -np.linalg.solve(normal, grad)
             except np.linalg.LinAlgError:
@@ -486,7 +510,7 @@ class NormalisedRefiner:
             accepted = False
             for _ in range(4):
                 cand = gvec + step
-                cand = (cand / np.linalg.norm(cand)).reshape(3, 3)
+                cand = (cand / _norm(cand)).reshape(3, 3)
                 if np.all(np.isfinite(cand)):
                     ec, cand_state = self._evaluate(cand, dst_n, weights)
                     if ec <= e:
@@ -499,7 +523,7 @@ class NormalisedRefiner:
             if float(np.sum(g_start * g)) < 0:
                 g_start = -g_start
             ext = g + over_relaxation * (g - g_start)
-            norm = np.linalg.norm(ext)
+            norm = _norm(ext)
             if np.isfinite(norm) and norm > 0:
                 ext = ext / norm
                 e_ext = self._evaluate(ext, dst_n, weights)[0]

@@ -40,7 +40,9 @@ class NearestPoints:
         """Keep the points and their tree; nothing is cached yet."""
         self.points = points
         self.tree = tree if tree is not None else cKDTree(points)
-        # Per bound: (reference predictions, closest index or -1, radius of validity).
+        # The points and one spare row, which index -1 (no closest point) reads.
+        self._padded = np.vstack([points, np.zeros((1, 2))])
+        # Per bound: (reference predictions, closest index or -1, squared radius of validity).
         self._cache: dict[float | None, tuple[np.ndarray, np.ndarray, np.ndarray]] = {}
         self.queried = 0
 
@@ -57,6 +59,15 @@ class NearestPoints:
             ``(distances, indices)``, (N,) float64 and (N,) int64.
 
         """
+        r, idx, _ = self.query_closest(pred, bound)
+        return r, idx
+
+    def query_closest(self, pred: np.ndarray, bound: float | None = None
+                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return :meth:`query`'s distances and indices, and the (N, 2) closest points.
+
+        A prediction without a closest point (index -1) gets a meaningless closest point.
+        """
         n = pred.shape[0]
         cached = self._cache.get(bound)
         if cached is None or cached[0].shape[0] != n:
@@ -65,23 +76,22 @@ class NearestPoints:
             stale = np.arange(n)
         else:
             moved = pred - cached[0]
-            stale = np.flatnonzero(np.einsum('ij,ij->i', moved, moved)
-                                   >= cached[2] * cached[2])
+            stale = np.flatnonzero(np.einsum('ij,ij->i', moved, moved) >= cached[2])
         if stale.size:
             self._refresh(pred, stale, bound, *cached)
-        ref, idx, _ = cached
-        found = idx >= 0
-        diff = pred - self.points[np.where(found, idx, 0)]
+        idx = cached[1]
+        near = self._padded[idx]
+        diff = pred - near
         r = np.sqrt(np.einsum('ij,ij->i', diff, diff))
-        out = idx.copy()
+        missing = idx < 0
         if bound is not None:
-            found &= r < bound
-        r[~found] = np.inf
-        out[~found] = -1
-        return r, out
+            missing |= r >= bound
+        r[missing] = np.inf
+        out = np.where(missing, -1, idx)
+        return r, out, near
 
     def _refresh(self, pred: np.ndarray, stale: np.ndarray, bound: float | None,
-                 ref: np.ndarray, idx: np.ndarray, radius: np.ndarray) -> None:
+                 ref: np.ndarray, idx: np.ndarray, radius_sq: np.ndarray) -> None:
         """Query the stale predictions' two closest points and record their validity."""
         self.queried += stale.size
         reach = np.inf if bound is None else bound + max(bound, REACH_MARGIN_PX)
@@ -90,5 +100,6 @@ class NearestPoints:
         second = np.where(np.isfinite(d[:, 1]), d[:, 1], reach)
         ref[stale] = pred[stale]
         idx[stale] = np.where(found, i[:, 0], -1)
-        radius[stale] = np.where(found, 0.5 * (second - d[:, 0]),
-                                 reach - (bound if bound is not None else 0.0))
+        radius = np.where(found, 0.5 * (second - d[:, 0]),
+                          reach - (bound if bound is not None else 0.0))
+        radius_sq[stale] = radius * radius

@@ -29,7 +29,8 @@ class FrameResult:
         reason: Why the frame failed ('' when ok).
         state: Lock state after this frame: ``'locked'``, ``'tracking'`` or ``'searching'``.
         timings_ms: Milliseconds spent in ``features``, ``tracking``, ``estimate``, ``mask``
-            and ``total``.
+            and ``total``; ``challenge`` is the part of ``estimate`` spent on the lock's
+            challenge (:mod:`domplane_ros.stream.challenge`).
         warnings: Input problems that did not refuse the pair (a stamp jump, a size change),
             each a one-line message (see :mod:`domplane_ros.stream.health`).
         left_lines: (K, 4) float64 left line segments ``(x1, y1, x2, y2)`` (empty unless
@@ -131,14 +132,17 @@ class PairStep:
     initial: PlaneEstimate | None = None
     left: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
     right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
+    challenge_s: float = 0.0
 
 
-def stage_timings_ms(t0: float, spans: tuple[float, float], t3: float, t4: float, t5: float
-                     ) -> dict[str, float]:
+def stage_timings_ms(t0: float, spans: tuple[float, float], t3: float, t4: float, t5: float,
+                     challenge_s: float = 0.0) -> dict[str, float]:
     """Return the milliseconds of the features, tracking, estimate and mask, and the total.
 
     ``spans`` are the seconds of the features and the tracking (which interleave); the
-    estimate runs from ``t3`` to ``t4``, the mask from ``t4`` to ``t5``.
+    estimate runs from ``t3`` to ``t4`` (``challenge_s`` seconds of it on the lock's
+    challenge), the mask from ``t4`` to ``t5``.
     """
     return {'features': 1e3 * spans[0], 'tracking': 1e3 * spans[1],
-            'estimate': 1e3 * (t4 - t3), 'mask': 1e3 * (t5 - t4), 'total': 1e3 * (t5 - t0)}
+            'estimate': 1e3 * (t4 - t3), 'challenge': 1e3 * challenge_s,
+            'mask': 1e3 * (t5 - t4), 'total': 1e3 * (t5 - t0)}

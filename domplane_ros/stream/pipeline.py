@@ -205,7 +205,8 @@ class PlanePipeline:
                            left_points=feats.left_points,
                            right_points=feats.right_points, reinitialised=step.reinitialised,
                            reason=reason, state=self._state,
-                           timings_ms=stage_timings_ms(t0, spans, t3, t4, t5),
+                           timings_ms=stage_timings_ms(t0, spans, t3, t4, t5,
+                                                       step.challenge_s),
                            warnings=check.warnings, left_lines=feats.left_lines,
                            right_lines=feats.right_lines, warm_start=step.warm_start,
                            prediction=step.prediction, candidates=step.candidates,
@@ -275,7 +276,7 @@ class PlanePipeline:
                            left_points=empty, right_points=empty, reinitialised=False,
                            reason=reason, state=self._state,
                            timings_ms={'features': 0.0, 'tracking': 0.0, 'estimate': 0.0,
-                                       'mask': 0.0, 'total': total_ms},
+                                       'challenge': 0.0, 'mask': 0.0, 'total': total_ms},
                            warnings=warnings, fast_motion=fast)
 
     def _tracking_points(self, left: WorkingImage, right: WorkingImage,
@@ -360,7 +361,9 @@ class PlanePipeline:
                 return
             if not reason:
                 self._verified(step, estimate, verdict)
-                self._challenge_step(step, verdict, problem, feats, size, motions)
+                started = time.perf_counter()
+                if self._challenge_step(step, verdict, problem, feats, size, motions):
+                    step.challenge_s = time.perf_counter() - started
                 return
         if reason and reason == self._checks.too_few_reason(feats) and self._photometric_lock(
                 step, prediction if prediction is not None else self._last_h, size):
@@ -409,24 +412,24 @@ class PlanePipeline:
 
     def _challenge_step(self, step: PairStep, lock: Verdict, problem: TwoStep | FailedEstimate,
                         feats: Features, size: tuple[int, int],
-                        motions: tuple[np.ndarray, np.ndarray] | None) -> None:
+                        motions: tuple[np.ndarray, np.ndarray] | None) -> bool:
         """Every few locked pairs, let other planes challenge the lock, one task per pair.
 
         See :mod:`domplane_ros.stream.challenge`. The lock was verified in this pair already
-        (``lock``); only the challengers are.
+        (``lock``); only the challengers are. Returns whether a task ran in this pair.
         """
         if isinstance(problem, FailedEstimate) or step.estimate is None:
-            return
+            return False
         if self._challenge is None:
             if not self._trust.challenge_due():
-                return
+                return False
             self._challenge = Challenge()
         else:
             self._challenge.follow(motions)
         task = self._challenge.next_task()
         if task is None:
             self._challenge = None
-            return
+            return False
         if task.kind == COARSE:
             self._challenge.add_coarse_starts(
                 self._trust.coarse_candidates(step.left, step.right, shifted=False),
@@ -450,9 +453,10 @@ class PlanePipeline:
                     self._verified(step, *self._work().finished(step, problem, feats, size,
                                                                 best, verdict))
                     self._challenge = None
-                    return
+                    return True
         if self._challenge.done:
             self._challenge = None
+        return True
 
     def _work(self) -> CandidateWork:
         """Return the candidate work on this pair's settings, gate and checks."""

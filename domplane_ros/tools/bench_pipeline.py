@@ -10,7 +10,9 @@ pair interleaved, so a noisy machine slows both alike; ratios are ORB / ours. Ro
   prediction, warm-started estimate, verification, mask) on a rendered moving sequence at
   640x480, 1280x720 and 3840x2160 (the 4K frames are the 1280x720 renders upscaled 3x, bicubic,
   with the truth scaled: the renderer is too slow at 4K), with the median transfer error;
-* ``of which tracker`` / ``of which mask``: those stages' own times in the same pairs;
+* ``of which tracker`` / ``of which mask`` / ``of which challenge``: those stages' own times
+  in the same pairs (the challenge: the lock's challenge task of the pair, if any,
+  :mod:`~domplane_ros.stream.challenge`; with how many pairs carried one over 2 ms);
 * ``cold 640x480``: a fresh pipeline per pair (the whole prior search, the coarse candidates and
   the verification) on rendered scenes, with how many pairs published a plane on that first
   pair, how many of those are correct (< 1 px) and the precision (correct / published);
@@ -139,7 +141,7 @@ def _timed(call: Callable[[], Any]) -> tuple[Any, float]:
 
 def bench_warm(width: int, height: int, n_frames: int, seed: int,
                config: PlaneNodeConfig | None = None) -> list[Row]:
-    """Return the warm rows of one size: the whole pair, the tracker and the mask."""
+    """Return the warm rows of one size: the whole pair, the tracker, the mask, the challenge."""
     frames, setup = sequence(width, height, n_frames, seed)
     config = config or PlaneNodeConfig()
     pipeline = PlanePipeline(config)
@@ -148,6 +150,7 @@ def bench_warm(width: int, height: int, n_frames: int, seed: int,
     whole = Row(f'warm {size}')
     tracker = Row(f'  of which tracker {size}', base_name='')
     mask = Row(f'  of which mask {size}', base_name='')
+    challenge = Row(f'  of which challenge {size}', base_name='')
     for i, frame in enumerate(frames):
         result, ours = _timed(lambda: pipeline.process(
             message_to_gray(frame.left), message_to_gray(frame.right), i * 33_000_000))
@@ -160,11 +163,14 @@ def bench_warm(width: int, height: int, n_frames: int, seed: int,
         whole.base_err.append(frame.error(h))
         tracker.ours.append(1e-3 * result.timings_ms['tracking'])
         mask.ours.append(1e-3 * result.timings_ms['mask'])
+        challenge.ours.append(1e-3 * result.timings_ms['challenge'])
     features = config.features
     level = working_level(width, features.max_width, height, features.max_megapixels)
     whole.note = (f'working {-(-width >> level)}x{-(-height >> level)} (features.max_width '
                   f'{features.max_width}, max_megapixels {features.max_megapixels:g})')
-    return [whole, tracker, mask]
+    busy = sum(t > 0.002 for t in challenge.ours)
+    challenge.note = f'a task over 2 ms in {busy} of {len(challenge.ours)} pairs'
+    return [whole, tracker, mask, challenge]
 
 
 def bench_cold(n_pairs: int, seed: int) -> Row:

@@ -124,3 +124,29 @@ def test_corner_distance_is_the_largest_corner_displacement():
     to_infinity = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [-1.0 / 639.0, 0.0, 1.0]])
     # A corner mapped to infinity: a distance no threshold passes.
     assert corner_distance_px(np.eye(3), to_infinity, 640, 480) > 1e6
+
+
+@pytest.mark.parametrize('weighted', [False, True])
+def test_normal_equations_are_those_of_the_explicit_jacobian(weighted):
+    # Ground truth: J^T W J and J^T W r from the Jacobian of the normalised transfer residuals
+    # written out row by row (x residual [m, 0, -px m], y residual [0, m, -py m]).
+    from domplane_ros.core.homography import _normal_equations
+
+    rng = np.random.default_rng(11)
+    n = 40
+    src_h = np.column_stack([rng.normal(size=(n, 2)), np.ones(n)])
+    g = np.eye(3) + 0.1 * rng.normal(size=(3, 3))
+    uvw = src_h @ g.T
+    iw = 1.0 / uvw[:, 2]
+    px, py = uvw[:, 0] * iw, uvw[:, 1] * iw
+    dst_n = np.column_stack([px, py]) + rng.normal(0, 0.05, (n, 2))
+    w = rng.uniform(0.0, 2.0, n) if weighted else None
+    m = src_h * iw[:, None]
+    zero = np.zeros((n, 3))
+    jac = np.vstack([np.hstack([m, zero, -px[:, None] * m]),
+                     np.hstack([zero, m, -py[:, None] * m])])
+    res = np.concatenate([px - dst_n[:, 0], py - dst_n[:, 1]])
+    ww = np.ones(2 * n) if w is None else np.concatenate([w, w])
+    normal, grad = _normal_equations(m, px, py, dst_n, w)
+    np.testing.assert_allclose(normal, jac.T @ (ww[:, None] * jac), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(grad, jac.T @ (ww * res), rtol=1e-12, atol=1e-12)

@@ -25,10 +25,12 @@ def test_same_answers_as_a_fresh_query_while_predictions_move(seed, bound):
     for step in range(12):
         # Moves from large (a fresh start) to tiny (convergence), as in the iteration.
         pred = pred + rng.normal(0, [8.0, 1.0, 0.1, 0.01][step % 4], pred.shape)
-        r, idx = nearest.query(pred, bound)
+        r, idx, closest = nearest.query_closest(pred, bound)
         r0, idx0 = _fresh(tree, pred, bound)
         np.testing.assert_array_equal(idx, idx0)
         np.testing.assert_allclose(r, r0, rtol=1e-12, atol=1e-12)
+        found = idx0 >= 0
+        np.testing.assert_array_equal(closest[found], points[idx0[found]])
 
 
 def test_queries_only_the_predictions_that_moved_far_enough():

@@ -56,3 +56,29 @@ def test_distinct_starts_keep_the_first_of_each_neighbourhood():
     assert len(kept) == 3
     # With a lock at 50 px, its neighbours go too.
     assert len(distinct_starts(starts, SIZE, lock=_shift(49.0))) == 2
+
+
+def test_the_challenge_time_is_reported_as_part_of_the_estimate():
+    # A rendered sequence locked from its first pair; with challenge_period 1 the challenge
+    # starts on the first locked pair, so a pair with a task reports its time (within the
+    # estimate's), and without the challenge every pair reports 0.
+    from dataclasses import replace
+
+    from domplane_ros.config import PlaneNodeConfig
+    from domplane_ros.sim.generators import scene_sequence
+    from domplane_ros.stream.pipeline import PlanePipeline
+
+    frames = scene_sequence(4, 3, width=320, height=240, floor='random')
+    base = PlaneNodeConfig()
+    reported = {}
+    for period in (0, 1):
+        config = replace(base, verification=replace(base.verification,
+                                                    challenge_period=period))
+        pipeline = PlanePipeline(config)
+        results = [pipeline.process(f.left, f.right, i * 33_000_000)
+                   for i, f in enumerate(frames)]
+        assert all(r.ok for r in results)
+        reported[period] = [(r.timings_ms['challenge'], r.timings_ms['estimate'])
+                            for r in results[1:]]
+    assert all(challenge == 0.0 for challenge, _ in reported[0])
+    assert all(0.0 < challenge <= estimate for challenge, estimate in reported[1])
