@@ -242,12 +242,12 @@ class CoarseAligner:
         backward = self._flow.calc(right, left, None)
         height, width = left.shape
         ys, xs = np.mgrid[2:height - 2:step, 2:width - 2:step]
-        ys, xs = ys.ravel(), xs.ravel()
         flow = forward[ys, xs]
-        tx = xs + flow[:, 0]
-        ty = ys + flow[:, 1]
-        back = cv2.remap(backward, tx.reshape(1, -1).astype(np.float32),
-                         ty.reshape(1, -1).astype(np.float32), cv2.INTER_LINEAR).reshape(-1, 2)
+        tx = (xs + flow[..., 0]).astype(np.float32)
+        ty = (ys + flow[..., 1]).astype(np.float32)
+        # The maps keep the grid's 2-D shape: remap refuses maps of 32767 columns or more.
+        back = cv2.remap(backward, tx, ty, cv2.INTER_LINEAR).reshape(-1, 2)
+        ys, xs, flow, tx, ty = ys.ravel(), xs.ravel(), flow.reshape(-1, 2), tx.ravel(), ty.ravel()
         disagreement = np.hypot(flow[:, 0] + back[:, 0], flow[:, 1] + back[:, 1])
         grad = _gradient(left)[ys, xs]
         keep = ((tx >= 0) & (tx <= width - 1) & (ty >= 0) & (ty <= height - 1)

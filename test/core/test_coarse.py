@@ -87,3 +87,13 @@ def test_the_photometric_refinement_needs_texture_and_checks_its_input():
     assert CoarseAligner().refine(flat, flat, np.eye(3)) is None
     with pytest.raises(ValueError, match='same size'):
         CoarseAligner().refine(flat, flat[:, :100], np.eye(3))
+
+
+def test_a_portrait_image_is_refined_too():
+    # 480 x 640 portrait: the refinement's sample grid has more than 32767 points, which
+    # OpenCV's remap refuses as a single row of maps.
+    frame = random_scene(4, 480, 640, floor='planks')
+    moved = np.array([[1.0, 0.0, 1.5], [0.0, 1.0, -1.0], [0.0, 0.0, 1.0]]) @ frame.homography
+    refined = CoarseAligner().refine(frame.left, frame.right, moved)
+    assert refined is not None
+    assert plane_error_px(frame, refined) < 0.5 * plane_error_px(frame, moved)
