@@ -177,7 +177,11 @@ class CoarseAligner:
         """Return a plane moved onto the dense flow that is left after warping by it.
 
         The right image is warped into the left view by ``homography`` and aligned to the left
-        image by the same flow (at the working width); a homography is fitted robustly
+        image by the same flow, at half the image width but at least ``width_px`` and at most
+        twice it (the flow's noise grows with the image's reduction: on 12 rendered 1280x720
+        tuning scenes, refined twice from 3.6 px off, median 0.58 px at 320 px wide and 0.19
+        px at 640; on KITTI's 1242 px, from the true road plane, 1.76 px at 320 and 0.61 px
+        at 621); a homography is fitted robustly
         (MAGSAC++, :data:`REFINE_THRESHOLD_PX`) to the textured samples whose residual flow is
         under :data:`REFINE_NEAR_PX`, the plane's own pixels, and composed with the plane.
         This is a photometric refinement: it corrects the bias of the corners' closest-point
@@ -199,7 +203,8 @@ class CoarseAligner:
 
         """
         _check_pair(left, right)
-        scale = min(1.0, self.config.width_px / left.shape[1])
+        width = min(max(left.shape[1] / 2.0, self.config.width_px), 2.0 * self.config.width_px)
+        scale = min(1.0, width / left.shape[1])
         small_l, small_r = _reduce(left, scale), _reduce(right, scale)
         if min(small_l.shape) < MIN_SIZE_PX:
             return None
