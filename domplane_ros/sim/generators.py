@@ -97,7 +97,7 @@ def random_scene(seed: int, width: int = 640, height: int = 480, floor: str | No
                  n_boxes: int | tuple[int, int] = (1, 5), gain: float | None = 1.0,
                  offset: float | None = 0.0, noise_std: float = 1.0,
                  background: str | None = None, setup: CameraSetup | None = None,
-                 blur_sigma: float = 0.5) -> StereoFrame:
+                 blur_sigma: float = 0.5, box_contrast: float = 1.0) -> StereoFrame:
     """Render a random scene: set-up within :data:`SETUP_RANGES`, 1-5 boxes in view.
 
     Args:
@@ -113,6 +113,8 @@ def random_scene(seed: int, width: int = 640, height: int = 480, floor: str | No
         background: ``'horizon'``, ``'wall'`` or None for a random one.
         setup: A fixed camera set-up instead of a random one.
         blur_sigma: Gaussian blur of both images in pixels.
+        box_contrast: Contrast of the box face texture (1 as drawn, 0 plain faces; see
+            :func:`~domplane_ros.sim.render.render_stereo`). Every other choice is the same.
 
     Returns:
         The rendered :class:`StereoFrame`.
@@ -131,7 +133,8 @@ def random_scene(seed: int, width: int = 640, height: int = 480, floor: str | No
     offset = float(rng.uniform(-20, 20)) if offset is None else offset
     return render_stereo(setup, boxes, floor=floor, seed=int(seed), gain=gain, offset=offset,
                          noise_std=noise_std, head_pose=pose, background=background,
-                         wall_distance=float(rng.uniform(8, 20)), blur_sigma=blur_sigma)
+                         wall_distance=float(rng.uniform(8, 20)), blur_sigma=blur_sigma,
+                         box_contrast=box_contrast)
 
 
 def indoor_scene(seed: int, width: int = 640, height: int = 480,

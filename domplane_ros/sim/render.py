@@ -226,8 +226,13 @@ def _draw_wall(canvas: _Canvas, rays: _Rays, origin: np.ndarray, t_wall: np.ndar
 
 
 def _draw_box(canvas: _Canvas, rays: _Rays, origin: np.ndarray, rot_cl: np.ndarray,
-              box: _PlacedBox, box_pyramid: tuple[np.ndarray, ...]) -> None:
-    """Paint a box's faces where they are nearer than what the canvas holds."""
+              box: _PlacedBox, box_pyramid: tuple[np.ndarray, ...],
+              box_contrast: float = 1.0) -> None:
+    """Paint a box's faces where they are nearer than what the canvas holds.
+
+    ``box_contrast`` scales the face texture about mid grey (1 as drawn, 0 a plain face that
+    only its Lambert shade and brightness set).
+    """
     height, width = canvas.label.shape
     rect = _project_rect(box.corners_level(), origin, rot_cl, rays.k_sub, width, height)
     if rect is None:
@@ -256,6 +261,8 @@ def _draw_box(canvas: _Canvas, rays: _Rays, origin: np.ndarray, rot_cl: np.ndarr
     footprint = t * rays.pixel_angle / np.maximum(d_normal, 1e-3) ** _ANISOTROPY / BOX_TEXEL
     tex = sample(box_pyramid, (face_u + offsets[:, 0]) / BOX_TEXEL,
                  (face_v + offsets[:, 1]) / BOX_TEXEL, footprint)
+    if box_contrast != 1.0:
+        tex = 0.5 + box_contrast * (tex - 0.5)
     direction = np.choose(ax, (ldx, ldy, ldz))
     side = (direction < 0).astype(np.int64)  # entering the + face moving in -direction
     shade = box.shade[ax, side]
@@ -266,7 +273,7 @@ def _draw_box(canvas: _Canvas, rays: _Rays, origin: np.ndarray, rot_cl: np.ndarr
 
 def render_view(setup: CameraSetup, origin: np.ndarray, rot_cl: np.ndarray,
                 boxes: list[_PlacedBox], floor: str, variant: int, head_pose: HeadPose,
-                wall_distance: float | None, supersample: int
+                wall_distance: float | None, supersample: int, box_contrast: float = 1.0
                 ) -> tuple[np.ndarray, np.ndarray]:
     """Ray-cast one camera.
 
@@ -280,6 +287,7 @@ def render_view(setup: CameraSetup, origin: np.ndarray, rot_cl: np.ndarray,
         head_pose: Where the head stands on the floor texture.
         wall_distance: Distance of the wall ahead, or None for the horizon.
         supersample: Rays per pixel along each axis.
+        box_contrast: Contrast of the box face texture (1 as drawn, 0 plain faces).
 
     Returns:
         ``(radiance, label)``: (H * s, W * s) float32 values in [0, 1] and int8 surface labels
@@ -300,7 +308,7 @@ def render_view(setup: CameraSetup, origin: np.ndarray, rot_cl: np.ndarray,
         _draw_wall(canvas, rays, origin, t_wall, variant)
     box_pyramid = texture_pyramid('box', variant)
     for box in boxes:
-        _draw_box(canvas, rays, origin, rot_cl, box, box_pyramid)
+        _draw_box(canvas, rays, origin, rot_cl, box, box_pyramid, box_contrast)
     return canvas.value, canvas.label
 
 
@@ -432,7 +440,7 @@ def render_stereo(setup: CameraSetup, boxes: Sequence[Box] = (), floor: str = 'r
                   noise_std: float = 1.0, head_pose: HeadPose | None = None,
                   background: str = 'horizon', wall_distance: float = 15.0,
                   blur_sigma: float = 0.5, noise_seed: int | None = None,
-                  supersample: int = 2) -> StereoFrame:
+                  supersample: int = 2, box_contrast: float = 1.0) -> StereoFrame:
     """Render a stereo pair of a textured floor with boxes, and its ground truth.
 
     Args:
@@ -453,15 +461,20 @@ def render_stereo(setup: CameraSetup, boxes: Sequence[Box] = (), floor: str = 'r
             disables; the default 0.5 keeps pixel-scale texture from aliasing).
         noise_seed: Seed of the pixel noise (default: ``seed``).
         supersample: Rays per pixel along each axis (anti-aliasing).
+        box_contrast: Contrast of the box face texture about mid grey, in [0, 1]: 1 (the
+            default) as drawn, 0 plain faces that only their shade sets (weakly textured
+            in between).
 
     Returns:
         The rendered :class:`StereoFrame`.
 
     Raises:
         ValueError: On an unknown floor kind or background, a non-finite or negative
-            photometric parameter, or ``supersample < 1``.
+            photometric parameter, ``supersample < 1`` or ``box_contrast`` outside [0, 1].
 
     """
+    if not 0.0 <= box_contrast <= 1.0:
+        raise ValueError(f'box_contrast must be in [0, 1], got {box_contrast}')
     _check_render_arguments(floor, background, gain, offset, noise_std, blur_sigma,
                             wall_distance, supersample)
     head_pose = head_pose or HeadPose()
@@ -474,7 +487,7 @@ def render_stereo(setup: CameraSetup, boxes: Sequence[Box] = (), floor: str = 'r
     labels = []
     for index, (origin, rot_cl) in enumerate(camera_poses(setup)):
         value, label = render_view(setup, origin, rot_cl, placed, floor, variant, head_pose,
-                                   wall, s)
+                                   wall, s, float(box_contrast))
         labels.append(label)
         images.append(_expose(value, setup, s, blur_sigma, (gain, offset) if index == 1 else None,
                               noise_std, rng))

@@ -1,6 +1,7 @@
 """Measure the ground/obstacle mask: residual parallax (now) against local NCC (before), one run.
 
 Run ``python -m domplane_ros.tools.evaluate_mask [--scenes N] [--held-out] [--indoor N]
+[--plain N]
 [--data DIR] [--out DIR] [--repeats R] [--baseline FILE]``. The masks run in the same process
 on the same images:
 
@@ -22,7 +23,13 @@ Data, each scored with the plane homography named in the table:
   medians over scenes: plane IoU, obstacle recall (also over the box pixels the right camera
   sees, the renderer's ``obstacle_hidden``) and precision, true ground marked obstacle,
   and floor hidden from the right camera by a box (the renderer's ``occluded_in_right``)
-  marked unknown and marked obstacle (over the scenes that have such floor).
+  marked unknown and marked obstacle (over the scenes that have such floor), and box pixels
+  marked plane.
+* **plain boxes**: the same seeds rendered again with plain box faces (``box_contrast`` 0 on
+  even seeds, 0.1, weakly textured, on odd ones; every other choice the same), ``--plain N``
+  of them (default: as many as ``--scenes``): the rendered figures, and the box pixels marked
+  plane (median and worst scene): a plain face cannot be measured, and must not be filled
+  as plane.
 * **KITTI 2015 000046**: road = ground-truth disparity pixels within 1 px of the robust road
   plane, off-road = pixels more than 1 px off it (the issue's labels); scored with the
   reference homography (from that plane) and with the homography our pipeline estimates (the
@@ -74,6 +81,8 @@ import numpy as np
 HELD_OUT_FIRST_SEED = 1000
 # The README picture's rendered scene.
 README_SEED = 6
+# Box face texture contrast of the plain-box scenes, by seed parity (untextured, weak).
+PLAIN_BOX_CONTRAST = (0.0, 0.1)
 INDOOR_FIRST_SEED = 0
 INDOOR_HELD_OUT_FIRST_SEED = 2000
 KITTI_LABEL_PX = 1.0
@@ -140,6 +149,8 @@ def rendered_scores(frame: StereoFrame, labels: np.ndarray) -> dict[str, float]:
     scores = mask_scores(labels, ground, frame.obstacle_left)
     scores['ground_as_obstacle'] = float(np.mean(labels[ground] == OBSTACLE)) \
         if ground.any() else math.nan
+    scores['box_as_plane'] = float(np.mean(labels[frame.obstacle_left] == PLANE)) \
+        if frame.obstacle_left.any() else math.nan
     seen = frame.obstacle_left & ~frame.obstacle_hidden if frame.obstacle_hidden is not None \
         else frame.obstacle_left
     scores['seen_obstacle_recall'] = float(np.mean(labels[seen] == OBSTACLE)) \
@@ -260,6 +271,21 @@ def evaluate_rendered(seeds: Sequence[int], sheet: list, shown: int = 4,
                             baseline)
 
 
+def plain_box_scene(seed: int) -> StereoFrame:
+    """Return :func:`random_scene` ``seed`` with plain faces (:data:`PLAIN_BOX_CONTRAST`)."""
+    return random_scene(seed, box_contrast=PLAIN_BOX_CONTRAST[seed % 2])
+
+
+def evaluate_plain(seeds: Sequence[int], sheet: list, shown: int = 0,
+                   baseline: Callable[..., ParallaxMask] | None = None
+                   ) -> dict[str, list[dict[str, float]]]:
+    """Score the masks on the rendered scenes with plain box faces (:func:`plain_box_scene`)."""
+    return _evaluate_frames(seeds, sheet, shown, 'plain boxes', plain_box_scene,
+                            rendered_scores,
+                            lambda seed, frame: f'plain boxes seed {seed} ({frame.floor})',
+                            baseline)
+
+
 def evaluate_indoor(seeds: Sequence[int], sheet: list, shown: int = 2,
                     baseline: Callable[..., ParallaxMask] | None = None
                     ) -> dict[str, list[dict[str, float]]]:
@@ -316,11 +342,8 @@ def evaluate_kitti(folder: Path, sheet: list,
     return out
 
 
-def summary(rendered: dict, indoor: dict, kitti: dict, times: dict[str, float],
-            held_out: bool) -> str:
-    """Return the tables of the run as text."""
-    seeds = 'held-out' if held_out else 'tuning'
-    header = ['data', 'figure', 'target'] + [TITLES[name] for name in rendered]
+def _rendered_rows(rendered: dict, data: str) -> list[list]:
+    """Return the table rows of the rendered figures (medians over scenes) of one data set."""
     rows = []
     for key, label in (('plane_iou', 'plane IoU (median)'),
                        ('obstacle_recall', 'obstacle recall (median)'),
@@ -329,11 +352,26 @@ def summary(rendered: dict, indoor: dict, kitti: dict, times: dict[str, float],
                        ('ground_as_obstacle', 'true ground marked obstacle (median)'),
                        ('plane_precision', 'plane precision (median)'),
                        ('occluded_unknown', 'occluded floor marked unknown (median)'),
-                       ('occluded_obstacle', 'occluded floor marked obstacle (median)')):
+                       ('occluded_obstacle', 'occluded floor marked obstacle (median)'),
+                       ('box_as_plane', 'box pixels marked plane (median)')):
         target = TARGETS.get(key)
-        rows.append([f'rendered, {seeds}, {len(rendered["ncc"])} scenes', label,
+        rows.append([f'{data}, {len(rendered["ncc"])} scenes', label,
                      '-' if target is None else fmt(target)]
                     + [_median(rendered[name], key) for name in rendered])
+    return rows
+
+
+def summary(rendered: dict, indoor: dict, kitti: dict, times: dict[str, float],
+            held_out: bool, plain: dict | None = None) -> str:
+    """Return the tables of the run as text."""
+    seeds = 'held-out' if held_out else 'tuning'
+    header = ['data', 'figure', 'target'] + [TITLES[name] for name in rendered]
+    rows = _rendered_rows(rendered, f'rendered, {seeds}')
+    if plain and plain['ncc']:
+        rows += _rendered_rows(plain, f'plain boxes, {seeds}')
+        rows.append([f'plain boxes, {seeds}, {len(plain["ncc"])} scenes',
+                     'box pixels marked plane (worst scene)', '-']
+                    + [max(r['box_as_plane'] for r in plain[name]) for name in plain])
     for h_name, scores in kitti.items():
         for key, label in (('road_plane', 'road marked plane'),
                            ('off_road_not_plane', 'off-road obstacle or unknown'),
@@ -379,6 +417,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = tool_parser(__doc__, 'python -m domplane_ros.tools.evaluate_mask')
     parser.add_argument('--scenes', type=int, default=30, help='rendered scenes (default 30)')
     parser.add_argument('--indoor', type=int, default=10, help='indoor scenes (default 10)')
+    parser.add_argument('--plain', type=int, default=None,
+                        help='rendered scenes with plain box faces (default: --scenes)')
     parser.add_argument('--held-out', action='store_true',
                         help=f'held-out seeds ({HELD_OUT_FIRST_SEED}.., '
                              f'{INDOOR_HELD_OUT_FIRST_SEED}.. indoor)')
@@ -404,12 +444,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     indoor_first = INDOOR_HELD_OUT_FIRST_SEED if args.held_out else INDOOR_FIRST_SEED
     sheet: list = []
     rendered = evaluate_rendered(range(first, first + args.scenes), sheet, baseline=baseline)
+    plain_count = args.scenes if args.plain is None else args.plain
+    plain = evaluate_plain(range(first, first + plain_count), sheet, baseline=baseline)
     indoor = evaluate_indoor(range(indoor_first, indoor_first + args.indoor), sheet,
                              baseline=baseline)
     kitti = evaluate_kitti(args.data / KITTI_DIR, sheet, baseline)
     frames = [random_scene(seed) for seed in range(first, first + 4)]
     times = time_masks(frames, args.repeats, baseline)
-    text = summary(rendered, indoor, kitti, times, args.held_out)
+    text = summary(rendered, indoor, kitti, times, args.held_out, plain)
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / 'mask_summary.txt').write_text(text, encoding='utf-8')
     picture = contact_sheet(sheet)

@@ -172,6 +172,25 @@ def test_bad_arguments_raise_value_error():
         CameraSetup(0.0, 0.1, 20.0, 0.0)
     with pytest.raises(ValueError, match='finite'):
         CameraSetup(500.0, float('nan'), 20.0, 0.0)
+    with pytest.raises(ValueError, match='box_contrast'):
+        render_stereo(SETUP, box_contrast=1.5)
+
+
+def test_box_contrast_makes_plain_faces_and_leaves_the_rest_as_drawn():
+    boxes = [Box(0.0, 4.0, 1.0, 1.0, 1.5, 30.0)]
+    drawn = render_stereo(SETUP, boxes, floor='checker', seed=3)
+    same = render_stereo(SETUP, boxes, floor='checker', seed=3, box_contrast=1.0)
+    plain = render_stereo(SETUP, boxes, floor='checker', seed=3, box_contrast=0.0)
+    assert np.array_equal(drawn.left, same.left) and np.array_equal(drawn.right, same.right)
+    box = cv2.erode(drawn.obstacle_left.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert box.sum() > 500 and np.array_equal(plain.obstacle_left, drawn.obstacle_left)
+    near_box = cv2.dilate(drawn.obstacle_left.astype(np.uint8), np.ones((7, 7), np.uint8)) > 0
+    floor = drawn.plane_left & ~near_box
+    assert np.array_equal(plain.left[floor], drawn.left[floor])
+    # Plain faces: only the shade (per face) and the pixel noise vary; the drawn ones vary.
+    gx = np.abs(cv2.Sobel(drawn.left, cv2.CV_32F, 1, 0))
+    gx_plain = np.abs(cv2.Sobel(plain.left, cv2.CV_32F, 1, 0))
+    assert np.median(gx_plain[box]) < 0.3 * np.median(gx[box])
 
 
 @pytest.mark.parametrize('floor', FAINT_TILE_KINDS)
