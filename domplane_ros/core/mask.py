@@ -72,6 +72,11 @@ _RISE_ROWS = 8
 # right image is plane, and that outline has at least this many pixels.
 _FILL_OUTLINE_SHARE = 0.95
 _FILL_MIN_OUTLINE = 4
+# Or when at least _FILL_FLAT_SHARE of it is plane and the coarse flow inside it is below
+# the parallax threshold on all but _FILL_MOVED_SHARE of it (docs/MASK.md round 7: chosen
+# with plain box faces in the tuning scenes).
+_FILL_FLAT_SHARE = 0.85
+_FILL_MOVED_SHARE = 0.1
 # A pixel is inside the right image when it maps this many working pixels inside its border,
 # so that every full-resolution pixel a working pixel covers maps inside too.
 _INSIDE_MARGIN_PX = 1.0
@@ -121,18 +126,25 @@ def _resize(image: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
     return small, resize_homography(new_w / width, new_h / height)
 
 
-def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray) -> None:
+def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray,
+                   flat: tuple[np.ndarray, float] | None = None) -> None:
     """Label as plane, in place, fillable regions whose outline is (almost) all plane.
 
     Only the outline inside the right image counts (the image border and pixels the right
     camera does not see neither support nor oppose the fill), and it must have at least
     :data:`_FILL_MIN_OUTLINE` pixels. The regions are found on every second pixel (plain
-    regions worth filling are large), and only fillable pixels change.
+    regions worth filling are large), and only fillable pixels change. A region whose outline
+    is at least :data:`_FILL_FLAT_SHARE` plane (a plain tile beside a box's bottom) is filled
+    too when the coarse flow inside it stays below the threshold on all but
+    :data:`_FILL_MOVED_SHARE` of it: the flow fills an untextured region from its edges, so
+    a plain obstacle face carries its edges' parallax and a plain floor tile none.
 
     Args:
         labels: (h, w) uint8 labels, changed in place.
         fillable: (h, w) bool, unknown pixels that may become plane.
         valid: (h, w) bool, pixels inside the right image.
+        flat: ``(flow, threshold)``: the (ceil(h/2), ceil(w/2)) float32 coarse flow at every
+            second pixel and the threshold in its units, or None for the outline rule only.
 
     """
     coarse = fillable[::2, ::2].astype(np.uint8)
@@ -159,6 +171,9 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray) 
     plane = (np.bincount(first, weights=is_plane, minlength=count)
              + np.bincount(second, weights=is_plane, minlength=count))
     fill = (plane >= _FILL_OUTLINE_SHARE * total) & (total >= _FILL_MIN_OUTLINE)
+    if flat is not None:
+        fill |= _flat_inside(components, count, flat) & (plane >= _FILL_FLAT_SHARE * total) \
+            & (total >= _FILL_MIN_OUTLINE)
     fill[0] = False
     if not fill.any():
         return
@@ -267,6 +282,19 @@ def _first_row(shift_inf: np.ndarray) -> int | None:
     return max(0, row - _CUT_MARGIN_PX) // _CUT_MARGIN_PX * _CUT_MARGIN_PX
 
 
+def _flat_inside(components: np.ndarray, count: int, flat: tuple[np.ndarray, float]
+                 ) -> np.ndarray:
+    """Return (count,) bool: the coarse flow exceeds the threshold on few of a component."""
+    flow, threshold = flat
+    ids = components.ravel()
+    inside = np.flatnonzero(ids)
+    ids = ids[inside].astype(np.int64)
+    size = np.bincount(ids, minlength=count)
+    moved = np.bincount(ids, weights=np.abs(flow).ravel()[inside] >= np.float32(threshold),
+                        minlength=count)
+    return moved <= _FILL_MOVED_SHARE * size
+
+
 def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse: np.ndarray,
                 shift_inf: np.ndarray, px_per_working: float, config: MaskConfig,
                 halves: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -286,6 +314,7 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
         (h, w) uint8 labels and (h, w) float32 parallax (:class:`ParallaxMask`).
 
     """
+    flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
     fit = local_fit(left, warped, int(config.window_px), coarse)
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config)
     rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
@@ -295,7 +324,8 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     hidden = occlusion_shadow(left, warped, labels == OBSTACLE, halves)
     _set_where(labels, UNKNOWN, hidden)
     _set_where(parallax, NOT_MEASURED, hidden)
-    _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid)
+    _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid,
+                   (flow, float(config.parallax_threshold_px) / px_per_working))
     return labels, parallax
 
 

@@ -372,14 +372,31 @@ def test_fill_enclosed_only_adds_plane():
 
 def test_plain_box_face_is_not_filled_as_plane():
     # Tuning seed 26 with untextured box faces: the tall box's plain face has an outline that
-    # is 85-95 % plane (floor on both sides and at its bottom). Filling with an 85 % share
-    # turns 17 % of the box pixels plane (docs/MASK.md round 7); the 95 % rule leaves 3.6 %.
+    # is 85-95 % plane (floor on both sides and at its bottom). Filling on the outline alone
+    # at 85 % turns 17 % of the box pixels plane (docs/MASK.md round 7); the 95 % rule, and
+    # the 85 % rule with the flat-flow condition, leave 3.6 %.
     frame = random_scene(26, box_contrast=0.0)
     result = mask.parallax_mask(frame.left, frame.right, frame.homography, MaskConfig())
     box = frame.obstacle_left
     assert np.mean(result.labels[box] == mask.PLANE) < 0.08
     ground = frame.plane_left & frame.visible_in_right
     assert np.mean(result.labels[ground] == mask.PLANE) > 0.85
+
+
+def test_plain_tile_beside_a_box_is_filled_as_plane(monkeypatch):
+    # Tuning seed 20 (checker floor, two boxes): plain tiles whose outline is 5-15 % the
+    # boxes' bottoms, flat coarse flow inside. The outline rule alone (95 %) leaves 81 % of
+    # the visible ground plane; with the flat-flow fill 86 %, the new plane 98 % ground.
+    frame = random_scene(20)
+    ground = frame.plane_left & frame.visible_in_right
+    labels = mask.parallax_mask(frame.left, frame.right, frame.homography, MaskConfig()).labels
+    monkeypatch.setattr(mask, '_FILL_FLAT_SHARE', 1.01)  # the rule of round 6
+    before = mask.parallax_mask(frame.left, frame.right, frame.homography,
+                                MaskConfig()).labels
+    filled = (labels == mask.PLANE) & (before != mask.PLANE)
+    assert np.mean(labels[ground] == mask.PLANE) > 0.845
+    assert filled.sum() > 5000 and np.mean(ground[filled]) > 0.95
+    assert np.all(labels[before == mask.PLANE] == mask.PLANE)
 
 
 def test_bad_inputs_raise_value_error(frames):
