@@ -27,7 +27,9 @@ Three labels with a physical meaning:
 
 Obstacles are cleaned by a small opening and closing, plane gaps by a closing; unknown
 low-texture regions whose outline inside the right image is (almost) all plane, the plain
-interior of a tile, are filled as plane. The residual parallax itself is returned beside the
+interior of a tile, are filled as plane, and so are those whose outline is mostly plane
+(a plain tile beside a box's bottom) when the coarse flow inside them is flat: a plain
+obstacle face carries its edges' parallax. The residual parallax itself is returned beside the
 labels. Rows wholly above the horizon (less a margin) are unknown without being measured:
 no pixel there could be plane or obstacle, and the labels equal those of measuring them.
 """
