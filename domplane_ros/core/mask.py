@@ -286,7 +286,7 @@ def _first_row(shift_inf: np.ndarray) -> int | None:
 
 def _flat_inside(components: np.ndarray, count: int, flat: tuple[np.ndarray, float]
                  ) -> np.ndarray:
-    """Return (count,) bool: the coarse flow exceeds the threshold on few of a component."""
+    """Return (count,) bool: the flow is below the threshold on nearly all of a component."""
     flow, threshold = flat
     ids = components.ravel()
     inside = np.flatnonzero(ids)
