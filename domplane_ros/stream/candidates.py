@@ -136,8 +136,9 @@ class CandidateWork:
             return estimate, verdict
         polished = normalise_scale(polished)
         new_pred = problem.apply(polished)
-        n = problem.n_points
-        moved = np.linalg.norm(new_pred[:n] - pred[:n], axis=1) if n else np.zeros(1)
+        # The corners' predictions; with segments only (features.kind lines), the endpoints'.
+        n = problem.n_points or new_pred.shape[0]
+        moved = np.linalg.norm(new_pred[:n] - pred[:n], axis=1) if n else np.full(1, np.inf)
         if not float(np.median(moved)) <= TIGHT_POLISH_MAX_MOVE_PX:
             return estimate, verdict
         again = self.trust.judge(step.left, step.right, polished, self.config.features.roi)
