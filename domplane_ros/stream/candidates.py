@@ -104,6 +104,8 @@ class CandidateWork:
         the planes judged beside it), or the candidate and its own verdict where the finished
         plane is refused (both are verified).
         """
+        if best.potential == PHOTOMETRIC:
+            return best, verdict  # refined photometrically already; the corners cannot
         final = problem.estimate(best.homography, self.config.estimator, widen=False)
         if not final.ok or self.checks.rejection_reason(final, feats, size, bounds=False):
             return best, verdict
