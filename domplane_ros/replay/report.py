@@ -10,6 +10,7 @@ import tempfile
 from typing import TextIO
 
 from domplane_ros.core.estimator import PlaneEstimate
+from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.pipeline import FrameResult
 import numpy as np
 
@@ -44,8 +45,10 @@ class CsvOutput:
         estimate = result.estimate
         h = (result.homography.reshape(9).tolist() if result.homography is not None
              else [''] * 9)
-        # A failed estimate has no energy and did not converge; it may say how far it got.
+        # A failed estimate has no energy and did not converge; it may say how far it got. A
+        # photometric plane (too few corners) has no point energy either.
         solved = isinstance(estimate, PlaneEstimate)
+        energy = solved and estimate.potential != PHOTOMETRIC
         timings = result.timings_ms
         self._csv.writerow([
             result.stamp_ns, int(result.ok), int(result.reinitialised),
@@ -53,7 +56,7 @@ class CsvOutput:
             result.left_points.shape[0] + result.left_lines.shape[0],
             result.right_points.shape[0] + result.right_lines.shape[0], result.n_inliers,
             int(getattr(estimate, 'iterations', 0)),
-            repr(float(estimate.final_energy)) if solved else '',
+            repr(float(estimate.final_energy)) if energy else '',
             int(solved and bool(estimate.converged)),
             *[repr(float(v)) if v != '' else '' for v in h],
             *[f'{timings.get(k, float("nan")):.3f}'

@@ -104,6 +104,8 @@ class CandidateWork:
         the planes judged beside it), or the candidate and its own verdict where the finished
         plane is refused (both are verified).
         """
+        if best.potential == PHOTOMETRIC:
+            return best, verdict  # refined photometrically already; the corners cannot
         final = problem.estimate(best.homography, self.config.estimator, widen=False)
         if not final.ok or self.checks.rejection_reason(final, feats, size, bounds=False):
             return best, verdict
@@ -136,8 +138,9 @@ class CandidateWork:
             return estimate, verdict
         polished = normalise_scale(polished)
         new_pred = problem.apply(polished)
-        n = problem.n_points
-        moved = np.linalg.norm(new_pred[:n] - pred[:n], axis=1) if n else np.zeros(1)
+        # The corners' predictions; with segments only (features.kind lines), the endpoints'.
+        n = problem.n_points or new_pred.shape[0]
+        moved = np.linalg.norm(new_pred[:n] - pred[:n], axis=1) if n else np.full(1, np.inf)
         if not float(np.median(moved)) <= TIGHT_POLISH_MAX_MOVE_PX:
             return estimate, verdict
         again = self.trust.judge(step.left, step.right, polished, self.config.features.roi)

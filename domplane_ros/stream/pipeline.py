@@ -103,6 +103,7 @@ class PlanePipeline:
         self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
         self._state = SEARCHING
         self._tracking_frames = 0
+        self._photometric = False  # the lock is a plane of too few corners (photometric)
         self._search: _Search | None = None
         self._tracker = FrameTracker()
         self._challenge: Challenge | None = None
@@ -140,6 +141,7 @@ class PlanePipeline:
         self._last_energy_per_point = None
         self._state = SEARCHING
         self._tracking_frames = 0
+        self._photometric = False
         self._search = None
         self._challenge = None
         self._tracker.clear()
@@ -365,7 +367,9 @@ class PlanePipeline:
                 if self._challenge_step(step, verdict, problem, feats, size, motions):
                     step.challenge_s = time.perf_counter() - started
                 return
-        if reason and reason == self._checks.too_few_reason(feats) and self._photometric_lock(
+        # A plane of few corners (too few now, or a photometric lock): refine it photometrically.
+        few = self._photometric or reason == self._checks.too_few_reason(feats)
+        if reason and few and self._photometric_lock(
                 step, prediction if prediction is not None else self._last_h, size):
             return
         step.reason = reason
@@ -381,7 +385,6 @@ class PlanePipeline:
                                     self.config.features.roi, locked=True)
         if not verdict.accepted:
             return False
-        step.warm_start = PHOTOMETRIC
         self._verified(step, planes[0], verdict)
         return True
 
@@ -405,6 +408,9 @@ class PlanePipeline:
     def _verified(self, step: PairStep, estimate: PlaneEstimate, verdict: Verdict) -> None:
         """Publish a verified plane: lock on it."""
         step.estimate, step.accepted, step.confidence = estimate, True, verdict.confidence
+        self._photometric = estimate.potential == PHOTOMETRIC
+        if self._photometric:
+            step.warm_start = PHOTOMETRIC
         self._trust.record(verdict)
         self._state = LOCKED
         self._search = None
@@ -526,15 +532,26 @@ class PlanePipeline:
             best, verdict, _ = self._trust.pick(step.left, step.right, planes,
                                                 self.config.features.roi)
             if best is not None and verdict is not None:
-                step.warm_start = PHOTOMETRIC
                 self._verified(step, best, verdict)
             return
         pool, rejection, limit = self._search_pool(step, search, problem, feats, size, motions)
         self.stats.candidates += step.candidates
         step.warm_start = 'search'
-        best, verdict, unverified = self._trust.pick(
-            step.left, step.right, pool, self.config.features.roi,
-            lambda: self._swap_rivals(search, step, problem, feats, size))
+        rivals = lambda: self._swap_rivals(search, step, problem, feats, size)  # noqa: E731
+        best, verdict, unverified = self._trust.pick(step.left, step.right, pool,
+                                                     self.config.features.roi, rivals)
+        if not pool and not rejection and len(search.tried) >= limit:
+            # The corners gave no plane at all, not even a refused one (every start had too
+            # few inliers: a floor of few corners): the coarse planes refined
+            # photometrically, judged with the rivals. If none is published the corners'
+            # reason stands. (Not where the corners' planes were refused or unverified: there
+            # it published look-alikes, e.g. 12.9 px off on faint tiles, tuning seed 305.)
+            photometric = self._work().photometric_planes(
+                step, self._trust.coarse_candidates(step.left, step.right), size)
+            again = self._trust.pick(step.left, step.right, photometric,
+                                     self.config.features.roi, rivals) if photometric else None
+            if again is not None and again[0] is not None:
+                best, verdict, unverified = again
         search.best = best.homography if best is not None else None
         if best is not None and verdict is not None:
             if best is step.initial:

@@ -6,6 +6,7 @@ import json
 import math
 from typing import Any, Mapping, Sequence
 
+from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.health import input_diagnostic_values
 import numpy as np
 
@@ -159,13 +160,15 @@ def _result_values(result: Any, joint_speed: float | None,
     ``verification.min_score``); 0 when no plane was published.
     """
     ok = result is not None and result.ok
+    # A photometric plane (too few corners) has no point energy: 'n/a', not 0.
+    energy = ok and result.estimate.potential != PHOTOMETRIC
     return [
         ('warm start', (result.warm_start or 'none') if result is not None else 'none'),
         ('plane confidence', f'{result.confidence:.2f}' if ok else '0.00'),
         ('prior candidates (last frame)', result.candidates if result is not None else 0),
         (JOINT_SPEED_KEY, _joint_speed_text(joint_speed, implausible_joint_speed)),
         ('inliers', result.n_inliers if result is not None else 0),
-        ('final energy', f'{result.estimate.final_energy:.4g}' if ok else 'n/a'),
+        ('final energy', f'{result.estimate.final_energy:.4g}' if energy else 'n/a'),
         ('converged', bool(ok and result.estimate.converged)),
     ]
 

@@ -143,6 +143,7 @@ class TrustGate:
         self._locked_frames = 0
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
+        self._coarse_planes: dict[bool, np.ndarray] = {}
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
         """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
@@ -151,10 +152,12 @@ class TrustGate:
         images are verified as without it. The results are the same either way.
         """
         self._pair, self._working = (left, right), None
+        self._coarse_planes = {}
 
     def end_pair(self) -> None:
         """Forget the pair of :meth:`begin_pair`."""
         self._pair = self._working = None
+        self._coarse_planes = {}
 
     def _verify(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                 roi: Sequence[float] | None) -> PlaneVerification:
@@ -253,7 +256,11 @@ class TrustGate:
         """
         if not self.settings.coarse_candidates or left.shape != right.shape:
             return np.zeros((0, 3, 3))
-        return self._coarse.candidates(left, right, shifted)
+        if self._pair is None or self._pair[0] is not left or self._pair[1] is not right:
+            return self._coarse.candidates(left, right, shifted)
+        if shifted not in self._coarse_planes:  # once per pair of begin_pair
+            self._coarse_planes[shifted] = self._coarse.candidates(left, right, shifted)
+        return self._coarse_planes[shifted].copy()
 
     def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                 near_px: float = REFINE_NEAR_PX) -> np.ndarray | None:

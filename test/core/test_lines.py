@@ -5,7 +5,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import FeatureConfig, one_shot_search, PlaneNodeConfig, PriorConfig
-from domplane_ros.core.estimator import estimate_plane, FailedEstimate, PlaneEstimate
+from domplane_ros.core.estimator import estimate_plane, FailedEstimate, PlaneEstimate, TwoStep
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.lines import (detect_lines, LineMatcher, lines_reason, map_segments,
                                      segment_lengths, segment_lines, UNMATCHED_PX)
@@ -13,7 +13,9 @@ from domplane_ros.core.potentials import POTENTIALS
 from domplane_ros.sim.generators import random_scene, RENDERED_PRIOR
 from domplane_ros.sim.synthetic import (displace_homography, line_scene, plane_error_px,
                                         point_scene)
+from domplane_ros.stream.candidates import TIGHT_POLISH_RATIO
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
+from domplane_ros.stream.trust import TrustGate
 from hypothesis import assume, example, given, HealthCheck, settings, strategies as st
 import numpy as np
 import pytest
@@ -280,3 +282,34 @@ def test_pipeline_finds_low_texture_floor_with_lines(tiles, kind):
     # Inlier segments are drawn in cyan over the floor.
     cyan = (rgb[:, :, 0] < 80) & (rgb[:, :, 1] > 150) & (rgb[:, :, 2] > 150)
     assert np.count_nonzero(cyan) > 200
+
+
+def test_the_tight_polish_guard_holds_with_segments_only(tiles, monkeypatch):
+    # The published winner's tight polish is refused when it moves the predictions by more
+    # than TIGHT_POLISH_MAX_MOVE_PX; with segments only there are no corner predictions, and
+    # the guard measured nothing (a median of zeros) and let any polished plane through to the
+    # verification. Here the tight polish jumps 6 px: it must not even be judged.
+    config = PlaneNodeConfig(prior=RENDERED_PRIOR)
+    config = replace(config, features=replace(config.features, kind='lines'))
+    tight = TIGHT_POLISH_RATIO * config.estimator.threshold_px
+    polish, judge = TwoStep.polish, TrustGate.judge
+    jumps, judged = [], []
+
+    def jumping_polish(self, h, threshold_px, matched):
+        out = polish(self, h, threshold_px, matched)
+        if threshold_px == tight:
+            jumps.append(np.array([[1.0, 0.0, 6.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ h)
+            return (jumps[-1], *out[1:])
+        return out
+
+    def spy(self, left, right, homography, *args, **kwargs):
+        judged.append(np.asarray(homography))
+        return judge(self, left, right, homography, *args, **kwargs)
+
+    monkeypatch.setattr(TwoStep, 'polish', jumping_polish)
+    monkeypatch.setattr(TrustGate, 'judge', spy)
+    result = PlanePipeline(one_shot_search(config)).process(tiles.left, tiles.right, 0)
+    assert result.ok, result.reason
+    assert jumps, 'the tight polish did not run'
+    assert not any(np.allclose(h / h[2, 2], j / j[2, 2]) for h in judged for j in jumps)
+    assert _floor_error(tiles, result.homography) < 1.0
