@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 import math
 import time
+from typing import Callable
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import can_widen, GRADUATED, TwoStep
@@ -527,10 +528,7 @@ class PlanePipeline:
         reason = self._checks.too_few_reason(feats)
         if reason or isinstance(problem, FailedEstimate):
             step.reason = reason or problem.reason
-            planes = self._work().photometric_planes(
-                step, self._trust.coarse_candidates(step.left, step.right), size)
-            best, verdict, _ = self._trust.pick(step.left, step.right, planes,
-                                                self.config.features.roi)
+            best, verdict, _ = self._photometric_search(step, size)
             if best is not None and verdict is not None:
                 self._verified(step, best, verdict)
             return
@@ -546,11 +544,8 @@ class PlanePipeline:
             # photometrically, judged with the rivals. If none is published the corners'
             # reason stands. (Not where the corners' planes were refused or unverified: there
             # it published look-alikes, e.g. 12.9 px off on faint tiles, tuning seed 305.)
-            photometric = self._work().photometric_planes(
-                step, self._trust.coarse_candidates(step.left, step.right), size)
-            again = self._trust.pick(step.left, step.right, photometric,
-                                     self.config.features.roi, rivals) if photometric else None
-            if again is not None and again[0] is not None:
+            again = self._photometric_search(step, size, rivals)
+            if again[0] is not None:
                 best, verdict, unverified = again
         search.best = best.homography if best is not None else None
         if best is not None and verdict is not None:
@@ -564,6 +559,17 @@ class PlanePipeline:
                            'refined')
             return
         self._end_search(step, pool, rejection, unverified)
+
+    def _photometric_search(self, step: PairStep, size: tuple[int, int],
+                            rivals: Callable[[], list[np.ndarray]] | None = None
+                            ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
+        """Pick among the coarse planes refined photometrically (corners too few to tell)."""
+        planes = self._work().photometric_planes(
+            step, self._trust.coarse_candidates(step.left, step.right), size)
+        if not planes:
+            return None, None, ''
+        return self._trust.pick(step.left, step.right, planes, self.config.features.roi,
+                                rivals)
 
     def _search_pool(self, step: PairStep, search: _Search, problem: TwoStep, feats: Features,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
