@@ -370,12 +370,14 @@ class TwoStep:
             init: (3, 3) float64 initial homography.
             options: Estimator settings (its ``line_weight`` was fixed at construction).
             widen: Whether the truncated quadratic is graduated from ``options.gnc_start_px``
-                (GNC) in a multi-start (:func:`domplane_ros.core.basin.far_start`), which
-                widens its basin. None (a warm start): by how near the start looks
-                (:meth:`start_nearness`): near, plain (and widened only if that fails); far,
-                widened; doubtful, both, and the result of lower energy kept. False: never
-                (the prior's candidates, whose search covers far starts and whose look-alikes
-                a wide stage slides into). True: always. Other potentials ignore it.
+                (GNC), which widens its basin. None (a warm start): by how near the start
+                looks (:meth:`start_nearness`): near, plain (and widened only if that fails);
+                far, widened in a multi-start (:func:`domplane_ros.core.basin.far_start`);
+                doubtful, both, the result of lowest energy kept. False: never (the prior's
+                candidates, whose search covers far starts and whose look-alikes a wide stage
+                slides into). True: one graduated run from ``init`` (the pipeline's retry of a
+                refused warm plane: there the multi-start's moved starts reached a look-alike
+                after a cut that passed the verification). Other potentials ignore it.
 
         Returns:
             :class:`PlaneEstimate`, or :class:`FailedEstimate` for a singular or non-finite
@@ -386,9 +388,9 @@ class TwoStep:
         if reason:
             return FailedEstimate(f'initial {reason}')
         h = normalise_scale(init)
-        if not can_widen(options) or widen is False:
-            return self._estimate_from(h, options, False)
-        nearness = 'far' if widen else self.start_nearness(h, options.threshold_px)
+        if not can_widen(options) or widen is not None:
+            return self._estimate_from(h, options, can_widen(options) and bool(widen))
+        nearness = self.start_nearness(h, options.threshold_px)
         plain = None if nearness == 'far' else self._estimate_from(h, options, False)
         if nearness == 'near' and plain.ok:
             return plain
