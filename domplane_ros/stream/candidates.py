@@ -3,8 +3,8 @@
 The prior's candidates are many and most end on other planes, so they stop iterating early
 (:data:`CANDIDATE_TOLERANCE_PX`); the one that wins the verification is then iterated to the
 configured tolerance and verified again (:meth:`CandidateWork.finished`) before it is
-published. The coarse alignment's few starts keep the configured tolerance
-(:meth:`CandidateWork.coarse`).
+published. The swapped cameras' rivals (:mod:`domplane_ros.stream.swap`) stop there too; the
+coarse alignment's few starts keep the configured tolerance (:meth:`CandidateWork.coarse`).
 """
 
 from __future__ import annotations
@@ -92,16 +92,27 @@ class CandidateWork:
 
         They stop at :data:`CANDIDATE_TOLERANCE_PX` (the slow tail of the iteration, tens of
         rounds that move the plane by hundredths of a pixel, is left to the winner:
-        :meth:`finished`). The coarse alignment's few starts, the configured initial
-        homography and the swapped cameras' rivals keep the configured tolerance: they are
-        the search's only route to rigs outside the prior's model, and a coarse start on a
-        periodic floor can need the tail to gather its inliers (measured: the look-alike
-        that names a swap on a tiled floor, tuning seed 68).
+        :meth:`finished`). The coarse alignment's few starts and the configured initial
+        homography keep the configured tolerance: they are the search's only route to rigs
+        outside the prior's model, and a coarse start on a periodic floor can need the tail
+        to gather its inliers (measured: the look-alike that names a swap on a tiled floor,
+        tuning seed 68; stopped at this tolerance it is refused unverified instead, and the
+        winner's uniqueness moves, docs/speed.md eighth round).
         """
         options = self.config.estimator
         if options.tolerance_px >= CANDIDATE_TOLERANCE_PX:
             return options
         return replace(options, tolerance_px=CANDIDATE_TOLERANCE_PX)
+
+    @property
+    def rival_options(self) -> EstimatorConfig:
+        """Return the estimator settings of the swapped cameras' rivals: the candidates'.
+
+        Measured (docs/speed.md, eighth round): stopped at :data:`CANDIDATE_TOLERANCE_PX`
+        instead of the configured tolerance, the rivals' scores, the winners' uniqueness and
+        every published plane stayed the same, at a quarter fewer rounds of a cold pair.
+        """
+        return self.options
 
     def finished(self, step: PairStep, problem: TwoStep, feats: Features,
                  size: tuple[int, int], best: PlaneEstimate, verdict: Verdict

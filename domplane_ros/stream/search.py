@@ -218,9 +218,9 @@ class PlaneSearch:
 
         The swap is tested, not assumed absent (stream/swap.py), but only once a plane has
         been verified (:meth:`TrustGate.pick` asks for the rivals then): a search whose
-        planes all fail costs no rivals. They are iterated to the configured tolerance, not
-        the candidates': a rival left short of its best would make the winner look more
-        unique than it is.
+        planes all fail costs no rivals. They stop at the candidates' tolerance
+        (:attr:`CandidateWork.rival_options`): measured, the planes published and their
+        uniqueness stay the same as at the configured tolerance (docs/speed.md, eighth round).
         """
         if search.rivals is None:
             cfg = self._config()
@@ -228,7 +228,7 @@ class PlaneSearch:
             candidates = self.candidates(size)
             search.rivals = swap_rivals(
                 problem, candidates, min(cfg.prior.refine_best, candidates.shape[0]),
-                cfg.estimator, cfg.prior.screen_threshold_px,
+                self._work().rival_options, cfg.prior.screen_threshold_px,
                 lambda estimate: self._checks.rejection_reason(estimate, feats, size,
                                                                bounds=False),
                 lambda start: trust.polish(step.left, step.right, start, cfg.features.roi))
