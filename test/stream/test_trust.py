@@ -255,7 +255,8 @@ def test_rivals_stopped_early_publish_the_same(monkeypatch, make):
     # The swapped rivals stop at the candidates' tolerance (fewer rounds): the same plane,
     # confidence and uniqueness as with rivals run to the configured one (measured: the
     # coarse starts stopped there too move the uniqueness on cold 101 and, on seed 68,
-    # lose the coarse look-alike that only the swapped rivals refuse).
+    # lose the coarse look-alike that only the swapped rivals refuse). Seed 68 is ambiguous:
+    # decided by the rivals refined again to the configured tolerance.
     frame = make()
     rounds, picked = [], []
     estimate, pick = TwoStep.estimate, TrustGate.pick
@@ -289,6 +290,8 @@ def test_rivals_stopped_early_publish_the_same(monkeypatch, make):
         assert short.confidence == full.confidence
     else:
         assert short_picked == full_picked and 'swapped' in short.reason, short.reason
+        assert len(short_picked) == 2  # picked again, the rivals rechecked
+        return
     assert short_rounds < 0.9 * full_rounds, (short_rounds, full_rounds)
 
 
