@@ -33,7 +33,7 @@ import numpy as np
 __all__ = ['PlaneSearch', 'propagate']
 
 Motions = tuple[np.ndarray, np.ndarray] | None
-# (problem, start, wide, widen) -> the pipeline's warm estimate from ``start``.
+# (problem, start, wide) -> the pipeline's warm estimate from ``start``.
 WarmEstimate = Callable[[TwoStep | FailedEstimate, np.ndarray, bool],
                         PlaneEstimate | FailedEstimate]
 
