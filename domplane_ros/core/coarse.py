@@ -303,7 +303,7 @@ def _translated(image: np.ndarray, dx: float, dy: float) -> np.ndarray:
 
 def _reduce(image: np.ndarray, scale: float) -> np.ndarray:
     if scale >= 1.0:
-        return image
+        return np.ascontiguousarray(image)  # DIS refuses a view that is not contiguous
     return cv2.resize(image, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
 
 
