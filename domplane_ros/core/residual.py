@@ -3,7 +3,9 @@
 :func:`local_fit` gives, per pixel of the working image, the one-step one-dimensional
 Lucas-Kanade shift along the epipolar direction (the image x axis for the prior's head) with
 the window statistics that say whether to trust it (zero-shift normalised correlation, left
-window variance), and the coarse shift of DIS optical flow for large parallax. The float
+window variance), and the coarse shift of DIS optical flow for large parallax;
+:func:`shifted_ncc` the correlation of the same windows with the warped image moved by a
+per-pixel shift (the coarse flow's, to test it against the zero shift). The float
 images are this thread's :func:`~domplane_ros.core.scratch.scratch` arrays: a
 :class:`LocalFit` is valid until the next call in the same thread.
 """
@@ -38,12 +40,14 @@ class LocalFit:
         variance: (h, w) float32 grey-level variance of the left window.
         flow_shift: (h, w) float32 signed residual parallax from DIS optical flow, working
             pixels: coarse, but not limited to small shifts.
+        mean: (h, w) float32 grey-level mean of the left window.
     """
 
     shift: np.ndarray
     ncc: np.ndarray
     variance: np.ndarray
     flow_shift: np.ndarray
+    mean: np.ndarray
 
 
 def _dis_flow() -> cv2.DISOpticalFlow:
@@ -113,7 +117,8 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
     shift = cv2.divide(num, den, dst=num)
     if coarse is None:
         coarse = flow_shift(left, warped)
-    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse)
+    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse,
+                    mean=mean_a)
 
 
 def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int],
@@ -144,3 +149,44 @@ def flow_shift(left: np.ndarray, warped: np.ndarray,
                      dst=scratch('flow_x', left.shape), interpolation=cv2.INTER_LINEAR)
     out *= np.float32(-2.0)
     return out
+
+
+def shifted_ncc(left: np.ndarray, warped: np.ndarray, fit: LocalFit, rows: slice,
+                window: int) -> np.ndarray:
+    """Return the NCC of the left windows with the warped image moved by the coarse flow.
+
+    The warped image is sampled at ``x - round(fit.flow_shift)`` (a point nearer than the
+    plane with residual parallax ``r`` shows at ``x - r``; the nearest pixel, as the flow is
+    coarse), so where the flow is the true residual parallax the windows agree. Computed on
+    ``rows`` only, with the window's reach around them; the left windows' mean and variance
+    are the fit's. Fresh arrays: the fit's scratch arrays stay untouched.
+
+    Args:
+        left: (h, w) uint8 left image at the working scale.
+        warped: (h, w) uint8 right image warped into the left view.
+        fit: The :func:`local_fit` of these images (``mean``, ``variance``, ``flow_shift``).
+        rows: The rows wanted, ``slice(start, stop)`` within ``0 .. h``.
+        window: Side of the fit's square window, pixels.
+
+    Returns:
+        (stop - start, w) float32 normalised correlation of those rows.
+
+    """
+    height, width = left.shape
+    half = window // 2
+    top, bottom = max(0, rows.start - half), min(height, rows.stop + half)
+    map_x = np.arange(width, dtype=np.float32)[None, :] - fit.flow_shift[top:bottom]
+    map_y = np.repeat(np.arange(top, bottom, dtype=np.float32)[:, None], width, axis=1)
+    moved = cv2.remap(warped, map_x, map_y, cv2.INTER_NEAREST,
+                      borderMode=cv2.BORDER_REPLICATE)
+    band = left[top:bottom]
+    size = (window, window)
+    mean_b = cv2.boxFilter(moved, cv2.CV_32F, size)
+    var_b = _window_product(moved, moved, size, np.empty(band.shape, np.float32))
+    var_b -= cv2.multiply(mean_b, mean_b)
+    cov = _window_product(band, moved, size, np.empty(band.shape, np.float32))
+    cov -= cv2.multiply(fit.mean[top:bottom], mean_b, dst=mean_b)
+    norm = cv2.multiply(fit.variance[top:bottom], var_b, dst=var_b)
+    np.maximum(norm, np.float32(1e-6), out=norm)
+    ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
+    return ncc[rows.start - top:rows.stop - top]
