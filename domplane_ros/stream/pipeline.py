@@ -9,21 +9,18 @@ stream's bookkeeping (pair counters, input-problem counts, the status) lives in
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 import math
 import time
-from typing import Callable
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import can_widen, GRADUATED, TwoStep
 from domplane_ros.core.features import detect_corners, Features
-from domplane_ros.core.homography import as_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.mask import parallax_mask
-from domplane_ros.core.prior import prior_candidates, PriorSearch
+from domplane_ros.core.prior import PriorSearch
 from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
-from domplane_ros.core.tracking import predict_plane_homography
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC
 from domplane_ros.stream.challenge import (Challenge, COARSE, PRIOR_START, PRIOR_STARTS,
@@ -33,7 +30,7 @@ from domplane_ros.stream.detection import (carried_features, detect_features, fu
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import FrameTracker
-from domplane_ros.stream.swap import swap_rivals
+from domplane_ros.stream.search import PlaneSearch, propagate
 from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
 
@@ -64,16 +61,6 @@ class PipelineStats:
     carried: int = 0  # pairs whose corners were carried from an earlier pair, not detected
 
 
-@dataclass
-class _Search:
-    """A prior search spread over frames: candidates tried so far and the best result."""
-
-    tried: set[int] = field(default_factory=set)
-    best: np.ndarray | None = None
-    initial_tried: bool = False
-    rivals: list[np.ndarray] | None = None  # planes of swapped cameras (stream/swap.py)
-
-
 class PlanePipeline:
     """Dominant-plane estimation over a stream of stereo pairs.
 
@@ -101,11 +88,11 @@ class PlanePipeline:
         self.counts = counts if counts is not None else InputCounts()
         self.checks = PairChecks(self.counts)
         self._checks = AcceptanceChecks(self.counts, lambda: self.config)
-        self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
         self._state = SEARCHING
         self._tracking_frames = 0
         self._photometric = False  # the lock is a plane of too few corners (photometric)
-        self._search: _Search | None = None
+        self._searcher = PlaneSearch(lambda: self.config, lambda: self._trust, self._checks,
+                                     self.counts, lambda *args: self._warm_estimate(*args))
         self._tracker = FrameTracker()
         self._challenge: Challenge | None = None
         self._trust = TrustGate(self.config.verification)
@@ -129,7 +116,7 @@ class PlanePipeline:
                 or config.initial_homography != self.config.initial_homography):
             self.reset()
             self._checks.clear()
-            self._candidates_cache.clear()
+            self._searcher.prior_changed()
         if config.verification != self.config.verification:
             self._trust = TrustGate(config.verification)
         self.config = config
@@ -143,7 +130,7 @@ class PlanePipeline:
         self._state = SEARCHING
         self._tracking_frames = 0
         self._photometric = False
-        self._search = None
+        self._searcher.stop()
         self._challenge = None
         self._tracker.clear()
         self._trust.reset()
@@ -306,7 +293,7 @@ class PlanePipeline:
         t0 = time.perf_counter()
         tracked = self._tracker.track(
             left, right, self.config,
-            motion=not searching or (self._search is not None and self._search.best is not None),
+            motion=not searching or self._searcher.has_best,
             carry=not searching)
         t1 = time.perf_counter()
         carried = None
@@ -321,18 +308,12 @@ class PlanePipeline:
         corners = self._tracking_points(left, right, corners)
         return feats, corners, tracked.motions, None, (time.perf_counter() - t1, t1 - t0)
 
-    def _propagate(self, h: np.ndarray, motions: tuple[np.ndarray, np.ndarray] | None
-                   ) -> np.ndarray | None:
-        if motions is None:
-            return None
-        return predict_plane_homography(h, motions[0], motions[1])
-
     # --- Locked and tracking ---------------------------------------------------------------
     def _track_or_lock(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
                        size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
                        fast: bool) -> None:
         assert self._last_h is not None
-        prediction = self._propagate(self._last_h, motions)
+        prediction = propagate(self._last_h, motions)
         if prediction is not None and self._checks.bounds_reason(prediction, size, count=False):
             prediction = None
         step.prediction = prediction
@@ -414,7 +395,7 @@ class PlanePipeline:
             step.warm_start = PHOTOMETRIC
         self._trust.record(verdict)
         self._state = LOCKED
-        self._search = None
+        self._searcher.stop()
         self._tracking_frames = 0
 
     def _challenge_step(self, step: PairStep, lock: Verdict, problem: TwoStep | FailedEstimate,
@@ -442,7 +423,7 @@ class PlanePipeline:
                 self._trust.coarse_candidates(step.left, step.right, shifted=False),
                 step.estimate.homography, size)
         elif task.kind == SCREEN:
-            search = PriorSearch(problem, self._candidates(size),
+            search = PriorSearch(problem, self._searcher.candidates(size),
                                  self.config.prior.screen_threshold_px)
             self._challenge.add_prior_starts(search.candidates[i] for i in
                                              search.ranked()[:PRIOR_STARTS])
@@ -513,149 +494,19 @@ class PlanePipeline:
         self._tracking_frames = 0
         self._last_h = None
         self._last_energy_per_point = None
-        self._search = None
+        self._searcher.stop()
         self._challenge = None
 
     def _search_step(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
                      ) -> None:
-        """Refine the next candidates; publish the best verified plane (TrustGate.pick)."""
-        step.reinitialised = True
-        if self._search is None:
-            self._search = _Search()
+        """Run the search's step (stream/search.py); lock on the plane it verified, if any."""
+        if not self._searcher.running:
             self.stats.reinitialisations += 1
-        search = self._search
-        reason = self._checks.too_few_reason(feats)
-        if reason or isinstance(problem, FailedEstimate):
-            step.reason = reason or problem.reason
-            best, verdict, _ = self._photometric_search(step, size)
-            if best is not None and verdict is not None:
-                self._verified(step, best, verdict)
-            return
-        pool, rejection, limit = self._search_pool(step, search, problem, feats, size, motions)
+        found = self._searcher.step(step, feats, problem, size, motions)
         self.stats.candidates += step.candidates
-        step.warm_start = 'search'
-        rivals = lambda: self._swap_rivals(search, step, problem, feats, size)  # noqa: E731
-        best, verdict, unverified = self._trust.pick(step.left, step.right, pool,
-                                                     self.config.features.roi, rivals)
-        if not pool and not rejection and len(search.tried) >= limit:
-            # The corners gave no plane at all, not even a refused one (every start had too
-            # few inliers: a floor of few corners): the coarse planes refined
-            # photometrically, judged with the rivals. If none is published the corners'
-            # reason stands. (Not where the corners' planes were refused or unverified: there
-            # it published look-alikes, e.g. 12.9 px off on faint tiles, tuning seed 305.)
-            again = self._photometric_search(step, size, rivals)
-            if again[0] is not None:
-                best, verdict, unverified = again
-        search.best = best.homography if best is not None else None
-        if best is not None and verdict is not None:
-            if best is step.initial:
-                step.warm_start = 'initial'
-            self._verified(step, *self._work().finished(step, problem, feats, size, best,
-                                                        verdict))
-            return
-        if len(search.tried) < limit:
-            step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
-                           'refined')
-            return
-        self._end_search(step, pool, rejection, unverified)
-
-    def _photometric_search(self, step: PairStep, size: tuple[int, int],
-                            rivals: Callable[[], list[np.ndarray]] | None = None
-                            ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
-        """Pick among the coarse planes refined photometrically (corners too few to tell)."""
-        planes = self._work().photometric_planes(
-            step, self._trust.coarse_candidates(step.left, step.right), size)
-        if not planes:
-            return None, None, ''
-        return self._trust.pick(step.left, step.right, planes, self.config.features.roi,
-                                rivals)
-
-    def _search_pool(self, step: PairStep, search: _Search, problem: TwoStep, feats: Features,
-                     size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
-                     ) -> tuple[list[PlaneEstimate], str, int]:
-        """Return this frame's refined candidates, the last rejection and the search's size.
-
-        The pool: the configured initial homography (once per search), the best so far, the
-        next prior candidates by screening energy and the coarse photometric alignment's.
-        """
-        cfg = self.config
-        pool: list[PlaneEstimate] = []
-        budget = cfg.pipeline.search_candidates_per_frame
-        if cfg.initial_homography and not search.initial_tried:
-            search.initial_tried = True
-            budget -= 1
-            step.candidates += 1
-            init = as_homography(cfg.initial_homography, 'initial_homography')
-            first = problem.estimate(init, self.config.estimator, widen=False)
-            if first.ok and not self._checks.rejection_reason(first, feats, size):
-                pool.append(first)
-                step.initial = first
-        best = self._best_so_far(search, problem, feats, size, motions)
-        if best is not None and best.ok:
-            pool.append(best)
-        candidates = self._candidates(size)
-        limit = min(cfg.prior.refine_best, candidates.shape[0])
-        prior_search = PriorSearch(problem, candidates, cfg.prior.screen_threshold_px)
-        chosen = prior_search.ranked(search.tried)[:max(0, min(budget, limit - len(search.tried)))]
-        search.tried.update(chosen)
-        step.candidates += len(chosen)
-        refined, rejection = self._work().refined(prior_search, chosen, feats, size)
-        pool += refined
-        pool += self._work().coarse(step, problem, feats, size)
-        return pool, rejection, limit
-
-    def _swap_rivals(self, search: _Search, step: PairStep, problem: TwoStep,
-                     feats: Features, size: tuple[int, int]) -> list[np.ndarray]:
-        """Return the search's planes of swapped cameras, found once per search when needed.
-
-        The swap is tested, not assumed absent (stream/swap.py), but only once a plane has
-        been verified (:meth:`TrustGate.pick` asks for the rivals then): a search whose
-        planes all fail costs no rivals. They are iterated to the configured tolerance, not
-        the candidates': a rival left short of its best would make the winner look more
-        unique than it is.
-        """
-        if search.rivals is None:
-            cfg = self.config
-            candidates = self._candidates(size)
-            search.rivals = swap_rivals(
-                problem, candidates, min(cfg.prior.refine_best, candidates.shape[0]),
-                cfg.estimator, cfg.prior.screen_threshold_px,
-                lambda estimate: self._checks.rejection_reason(estimate, feats, size,
-                                                               bounds=False),
-                lambda start: self._trust.polish(step.left, step.right, start,
-                                                 cfg.features.roi))
-        return search.rivals
-
-    def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,
-                     size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None
-                     ) -> PlaneEstimate | FailedEstimate | None:
-        """Return the search's best so far, moved to this frame and refined on its features."""
-        if search.best is None:
-            return None
-        start = self._propagate(search.best, motions)
-        best = self._warm_estimate(problem, start if start is not None else search.best, False)
-        if best.ok and self._checks.rejection_reason(best, feats, size):
-            return None
-        return best
-
-    def _end_search(self, step: PairStep, pool: list[PlaneEstimate], rejection: str,
-                    unverified: str) -> None:
-        """No verified plane: say why, and start again with the next frame's features."""
-        if unverified:
-            self.counts.add('swapped_cameras' if 'swapped' in unverified else 'unverified_plane')
-            step.reason = f'search found no verified plane: {unverified}'
-        elif not pool and rejection:
-            self._checks.count_rejection(rejection)
-            step.reason = f'prior search found no plane: {rejection}'
-        else:
-            step.reason = 'prior search found no plane'
-        self._search = None
-
-    def _candidates(self, size: tuple[int, int]) -> np.ndarray:
-        if size not in self._candidates_cache:
-            self._candidates_cache[size] = prior_candidates(self.config.prior, *size)
-        return self._candidates_cache[size]
+        if found is not None:
+            self._verified(step, *found)
 
 
 def _check_frame(left: np.ndarray, right: np.ndarray, joint_speed: float | None) -> None:

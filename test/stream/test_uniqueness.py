@@ -17,7 +17,7 @@ from domplane_ros.core.features import detect_corners
 from domplane_ros.core.verification import verify_plane
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import plane_error_px, swapped
-from domplane_ros.stream import pipeline as pipeline_module
+from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import TrustGate, Verdict
@@ -46,7 +46,7 @@ def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypat
     assert 'swapped' in result.reason, result.reason
     # Without the swap's rivals a look-alike of the correctly ordered model is published.
     _wrong_without(frame, monkeypatch,
-                   (pipeline_module, 'swap_rivals', lambda *args, **kwargs: []))
+                   (search_module, 'swap_rivals', lambda *args, **kwargs: []))
 
 
 def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
@@ -143,13 +143,13 @@ def test_confidence_is_the_lesser_of_score_and_uniqueness(scene):
 
 def test_the_swap_rivals_are_found_only_once_a_plane_is_verified(monkeypatch):
     calls = []
-    found = pipeline_module.swap_rivals
+    found = search_module.swap_rivals
 
     def counted(*args, **kwargs):
         calls.append(1)
         return found(*args, **kwargs)
 
-    monkeypatch.setattr(pipeline_module, 'swap_rivals', counted)
+    monkeypatch.setattr(search_module, 'swap_rivals', counted)
     # Swapped cameras on a floor where nothing of the given order verifies: refused by name,
     # no rivals needed.
     frame = swapped(random_scene(4))

@@ -1,0 +1,261 @@
+"""The pipeline's searching state: the prior search spread over pairs, verified before publishing.
+
+A search starts when the pipeline has no plane to warm-start from (the first pair, a reset, a
+lock lost or refused). Each pair refines the next ``pipeline.search_candidates_per_frame``
+prior candidates by screening energy, the best plane so far (moved through the cameras'
+motion), the configured initial homography (once) and the coarse photometric alignment's
+planes; :meth:`~domplane_ros.stream.trust.TrustGate.pick` publishes the best of them only if
+it is verified and unique. A pair of too few corners gets its planes from the photometric
+refinement alone. The lock state itself (locked, tracking, searching) stays in
+:class:`~domplane_ros.stream.pipeline.PlanePipeline`, which owns one :class:`PlaneSearch`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable
+
+from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.core.estimator import TwoStep
+from domplane_ros.core.features import Features
+from domplane_ros.core.homography import as_homography
+from domplane_ros.core.prior import prior_candidates, PriorSearch
+from domplane_ros.core.result import FailedEstimate, PlaneEstimate
+from domplane_ros.core.tracking import predict_plane_homography
+from domplane_ros.stream.acceptance import AcceptanceChecks
+from domplane_ros.stream.candidates import CandidateWork
+from domplane_ros.stream.frame import PairStep
+from domplane_ros.stream.health import InputCounts
+from domplane_ros.stream.swap import swap_rivals
+from domplane_ros.stream.trust import TrustGate, Verdict
+import numpy as np
+
+__all__ = ['PlaneSearch', 'propagate']
+
+Motions = tuple[np.ndarray, np.ndarray] | None
+# (problem, start, wide, widen) -> the pipeline's warm estimate from ``start``.
+WarmEstimate = Callable[[TwoStep | FailedEstimate, np.ndarray, bool],
+                        PlaneEstimate | FailedEstimate]
+
+
+def propagate(h: np.ndarray, motions: Motions) -> np.ndarray | None:
+    """Return plane ``h`` moved through the cameras' tracked motions, or None without them.
+
+    Args:
+        h: (3, 3) plane homography of the previous pair.
+        motions: The left and right cameras' (3, 3) image motions, or None.
+
+    Returns:
+        The (3, 3) predicted homography, or None.
+
+    """
+    if motions is None:
+        return None
+    return predict_plane_homography(h, motions[0], motions[1])
+
+
+@dataclass
+class _Search:
+    """A prior search spread over frames: candidates tried so far and the best result."""
+
+    tried: set[int] = field(default_factory=set)
+    best: np.ndarray | None = None
+    initial_tried: bool = False
+    rivals: list[np.ndarray] | None = None  # planes of swapped cameras (stream/swap.py)
+
+
+class PlaneSearch:
+    """The prior search of one stream, spread over its pairs until a plane is verified.
+
+    Args:
+        config: Returns the pipeline's current configuration.
+        trust: Returns the pipeline's current verification gate.
+        checks: The pipeline's acceptance checks (bounds, spread, energy).
+        counts: Where refusals are counted (the session's input counts).
+        warm_estimate: The pipeline's warm estimate (used to refine the best plane so far).
+
+    """
+
+    def __init__(self, config: Callable[[], PlaneNodeConfig], trust: Callable[[], TrustGate],
+                 checks: AcceptanceChecks, counts: InputCounts,
+                 warm_estimate: WarmEstimate) -> None:
+        """Start idle: :meth:`step` begins a search."""
+        self._config = config
+        self._trust = trust
+        self._checks = checks
+        self._counts = counts
+        self._warm_estimate = warm_estimate
+        self._search: _Search | None = None
+        self._candidates_cache: dict[tuple[int, int], np.ndarray] = {}
+
+    @property
+    def running(self) -> bool:
+        """Return whether a search is under way (it has refined candidates)."""
+        return self._search is not None
+
+    @property
+    def has_best(self) -> bool:
+        """Return whether the search carries a best plane so far (worth tracking motion for)."""
+        return self._search is not None and self._search.best is not None
+
+    def stop(self) -> None:
+        """Drop the search: the next :meth:`step` starts a new one."""
+        self._search = None
+
+    def prior_changed(self) -> None:
+        """Forget the prior's candidates (the prior changed)."""
+        self._candidates_cache.clear()
+
+    def candidates(self, size: tuple[int, int]) -> np.ndarray:
+        """Return the prior's (N, 3, 3) candidates for images of ``size`` (width, height)."""
+        if size not in self._candidates_cache:
+            self._candidates_cache[size] = prior_candidates(self._config().prior, *size)
+        return self._candidates_cache[size]
+
+    def step(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
+             size: tuple[int, int], motions: Motions
+             ) -> tuple[PlaneEstimate, Verdict] | None:
+        """Refine this pair's candidates; return the verified plane to publish, or None.
+
+        ``step`` receives the candidates refined, the warm start's name and, without a plane,
+        the reason. A returned plane ends the search (finished: the configured tolerance,
+        the polish and the photometric refinement, each taken only if verified).
+        """
+        step.reinitialised = True
+        if self._search is None:
+            self._search = _Search()
+        search = self._search
+        reason = self._checks.too_few_reason(feats)
+        if reason or isinstance(problem, FailedEstimate):
+            step.reason = reason or problem.reason
+            best, verdict, _ = self._photometric_search(step, size)
+            return self._done(best, verdict)
+        pool, rejection, limit = self._pool(step, search, problem, feats, size, motions)
+        step.warm_start = 'search'
+        rivals = lambda: self._rivals(search, step, problem, feats, size)  # noqa: E731
+        roi = self._config().features.roi
+        best, verdict, unverified = self._trust().pick(step.left, step.right, pool, roi, rivals)
+        if not pool and not rejection and len(search.tried) >= limit:
+            # The corners gave no plane at all, not even a refused one (every start had too
+            # few inliers: a floor of few corners): the coarse planes refined
+            # photometrically, judged with the rivals. If none is published the corners'
+            # reason stands. (Not where the corners' planes were refused or unverified: there
+            # it published look-alikes, e.g. 12.9 px off on faint tiles, tuning seed 305.)
+            again = self._photometric_search(step, size, rivals)
+            if again[0] is not None:
+                best, verdict, unverified = again
+        search.best = best.homography if best is not None else None
+        if best is not None and verdict is not None:
+            if best is step.initial:
+                step.warm_start = 'initial'
+            return self._done(*self._work().finished(step, problem, feats, size, best, verdict))
+        if len(search.tried) < limit:
+            step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
+                           'refined')
+            return None
+        self._end(step, pool, rejection, unverified)
+        return None
+
+    def _done(self, best: PlaneEstimate | None, verdict: Verdict | None
+              ) -> tuple[PlaneEstimate, Verdict] | None:
+        if best is None or verdict is None:
+            return None
+        self._search = None
+        return best, verdict
+
+    def _work(self) -> CandidateWork:
+        return CandidateWork(self._config(), self._trust(), self._checks)
+
+    def _photometric_search(self, step: PairStep, size: tuple[int, int],
+                            rivals: Callable[[], list[np.ndarray]] | None = None
+                            ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
+        """Pick among the coarse planes refined photometrically (corners too few to tell)."""
+        trust = self._trust()
+        planes = self._work().photometric_planes(
+            step, trust.coarse_candidates(step.left, step.right), size)
+        if not planes:
+            return None, None, ''
+        return trust.pick(step.left, step.right, planes, self._config().features.roi, rivals)
+
+    def _pool(self, step: PairStep, search: _Search, problem: TwoStep, feats: Features,
+              size: tuple[int, int], motions: Motions
+              ) -> tuple[list[PlaneEstimate], str, int]:
+        """Return this frame's refined candidates, the last rejection and the search's size.
+
+        The pool: the configured initial homography (once per search), the best so far, the
+        next prior candidates by screening energy and the coarse photometric alignment's.
+        """
+        cfg = self._config()
+        pool: list[PlaneEstimate] = []
+        budget = cfg.pipeline.search_candidates_per_frame
+        if cfg.initial_homography and not search.initial_tried:
+            search.initial_tried = True
+            budget -= 1
+            step.candidates += 1
+            init = as_homography(cfg.initial_homography, 'initial_homography')
+            first = problem.estimate(init, cfg.estimator, widen=False)
+            if first.ok and not self._checks.rejection_reason(first, feats, size):
+                pool.append(first)
+                step.initial = first
+        best = self._best_so_far(search, problem, feats, size, motions)
+        if best is not None and best.ok:
+            pool.append(best)
+        candidates = self.candidates(size)
+        limit = min(cfg.prior.refine_best, candidates.shape[0])
+        prior_search = PriorSearch(problem, candidates, cfg.prior.screen_threshold_px)
+        chosen = prior_search.ranked(search.tried)[:max(0, min(budget, limit - len(search.tried)))]
+        search.tried.update(chosen)
+        step.candidates += len(chosen)
+        work = self._work()
+        refined, rejection = work.refined(prior_search, chosen, feats, size)
+        pool += refined
+        pool += work.coarse(step, problem, feats, size)
+        return pool, rejection, limit
+
+    def _rivals(self, search: _Search, step: PairStep, problem: TwoStep,
+                feats: Features, size: tuple[int, int]) -> list[np.ndarray]:
+        """Return the search's planes of swapped cameras, found once per search when needed.
+
+        The swap is tested, not assumed absent (stream/swap.py), but only once a plane has
+        been verified (:meth:`TrustGate.pick` asks for the rivals then): a search whose
+        planes all fail costs no rivals. They are iterated to the configured tolerance, not
+        the candidates': a rival left short of its best would make the winner look more
+        unique than it is.
+        """
+        if search.rivals is None:
+            cfg = self._config()
+            trust = self._trust()
+            candidates = self.candidates(size)
+            search.rivals = swap_rivals(
+                problem, candidates, min(cfg.prior.refine_best, candidates.shape[0]),
+                cfg.estimator, cfg.prior.screen_threshold_px,
+                lambda estimate: self._checks.rejection_reason(estimate, feats, size,
+                                                               bounds=False),
+                lambda start: trust.polish(step.left, step.right, start, cfg.features.roi))
+        return search.rivals
+
+    def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,
+                     size: tuple[int, int], motions: Motions
+                     ) -> PlaneEstimate | FailedEstimate | None:
+        """Return the search's best so far, moved to this frame and refined on its features."""
+        if search.best is None:
+            return None
+        start = propagate(search.best, motions)
+        best = self._warm_estimate(problem, start if start is not None else search.best, False)
+        if best.ok and self._checks.rejection_reason(best, feats, size):
+            return None
+        return best
+
+    def _end(self, step: PairStep, pool: list[PlaneEstimate], rejection: str,
+             unverified: str) -> None:
+        """No verified plane: say why, and start again with the next frame's features."""
+        if unverified:
+            self._counts.add('swapped_cameras' if 'swapped' in unverified
+                             else 'unverified_plane')
+            step.reason = f'search found no verified plane: {unverified}'
+        elif not pool and rejection:
+            self._checks.count_rejection(rejection)
+            step.reason = f'prior search found no plane: {rejection}'
+        else:
+            step.reason = 'prior search found no plane'
+        self._search = None
