@@ -159,7 +159,8 @@ def shifted_ncc(left: np.ndarray, warped: np.ndarray, fit: LocalFit, rows: slice
     plane with residual parallax ``r`` shows at ``x - r``; the nearest pixel, as the flow is
     coarse), so where the flow is the true residual parallax the windows agree. Computed on
     ``rows`` only, with the window's reach around them; the left windows' mean and variance
-    are the fit's. Fresh arrays: the fit's scratch arrays stay untouched.
+    are the fit's. Its own scratch arrays: the fit's stay untouched; the result is one of
+    them, valid until the next call in the same thread.
 
     Args:
         left: (h, w) uint8 left image at the working scale.
@@ -175,17 +176,21 @@ def shifted_ncc(left: np.ndarray, warped: np.ndarray, fit: LocalFit, rows: slice
     height, width = left.shape
     half = window // 2
     top, bottom = max(0, rows.start - half), min(height, rows.stop + half)
-    map_x = np.arange(width, dtype=np.float32)[None, :] - fit.flow_shift[top:bottom]
-    map_y = np.repeat(np.arange(top, bottom, dtype=np.float32)[:, None], width, axis=1)
+    shape = (bottom - top, width)
+    map_x = cv2.subtract(np.arange(width, dtype=np.float32)[None, :].repeat(shape[0], axis=0),
+                         fit.flow_shift[top:bottom], dst=scratch('shifted_x', shape))
+    map_y = scratch('shifted_y', shape)
+    map_y[:] = np.arange(top, bottom, dtype=np.float32)[:, None]
     moved = cv2.remap(warped, map_x, map_y, cv2.INTER_NEAREST,
-                      borderMode=cv2.BORDER_REPLICATE)
+                      dst=scratch('shifted', shape, np.uint8), borderMode=cv2.BORDER_REPLICATE)
     band = left[top:bottom]
     size = (window, window)
-    mean_b = cv2.boxFilter(moved, cv2.CV_32F, size)
-    var_b = _window_product(moved, moved, size, np.empty(band.shape, np.float32))
-    var_b -= cv2.multiply(mean_b, mean_b)
-    cov = _window_product(band, moved, size, np.empty(band.shape, np.float32))
-    cov -= cv2.multiply(fit.mean[top:bottom], mean_b, dst=mean_b)
+    tmp = scratch('shifted_tmp', shape)
+    mean_b = cv2.boxFilter(moved, cv2.CV_32F, size, dst=scratch('shifted_mean', shape))
+    var_b = _window_product(moved, moved, size, scratch('shifted_var', shape))
+    var_b -= cv2.multiply(mean_b, mean_b, dst=tmp)
+    cov = _window_product(band, moved, size, scratch('shifted_ncc', shape))
+    cov -= cv2.multiply(fit.mean[top:bottom], mean_b, dst=tmp)
     norm = cv2.multiply(fit.variance[top:bottom], var_b, dst=var_b)
     np.maximum(norm, np.float32(1e-6), out=norm)
     ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
