@@ -9,8 +9,9 @@ above the plane and falls with its distance. The shift is a dense one-step, one-
 Lucas-Kanade estimate at zero shift (box-filtered gradient products, gain and offset removed
 by the local means, regularised so that windows without texture across the epipolar direction
 fall back to zero), trusted up to one pixel at the working scale where the zero-shift
-normalised correlation (NCC) also holds; beyond that a clearly failed NCC says the pixel is off
-the plane without measuring by how much.
+normalised correlation (NCC) also holds, unless the coarse DIS flow puts the shift beyond that
+range and the window matches better at the flow's shift; beyond that a clearly failed NCC says
+the pixel is off the plane without measuring by how much.
 
 Three labels with a physical meaning:
 
@@ -46,7 +47,7 @@ from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
-from domplane_ros.core.residual import flow_shift, local_fit, LocalFit, shifted_ncc
+from domplane_ros.core.residual import beyond_linear_range, flow_shift, local_fit, LocalFit
 from domplane_ros.core.scratch import constant
 import numpy as np
 
@@ -318,7 +319,9 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     """
     flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
     fit = local_fit(left, warped, int(config.window_px), coarse)
-    beyond = _beyond_linear_range(left, warped, fit, valid, config)
+    measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
+    beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
+                                 float(config.ncc_threshold), _LINEAR_RANGE_PX)
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
                                             beyond)
     rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
@@ -390,30 +393,6 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
-def _beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit,
-                         valid: np.ndarray, config: MaskConfig) -> np.ndarray:
-    """Return (h, w) bool: small one-step shifts that the coarse flow's shift explains better.
-
-    The one-step estimate holds within :data:`_LINEAR_RANGE_PX` of zero. A window shifted by
-    several pixels can still correlate at zero shift (a smooth box face: 0.7-0.94 on the
-    tuning scenes, where the ground gives 0.94-1) and then measures a small shift. Where
-    the coarse flow says the shift lies beyond the linear range, the window is correlated
-    again at the flow's shift (:func:`shifted_ncc`): if it agrees better there than at zero,
-    the small shift is not trusted and the coarse flow decides (docs/MASK.md, round 8).
-    """
-    candidates = valid & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
-    candidates &= fit.ncc >= float(config.ncc_threshold)
-    candidates &= np.abs(fit.flow_shift) >= _LINEAR_RANGE_PX
-    candidates &= fit.variance >= float(config.min_texture) ** 2
-    rows = np.flatnonzero(candidates.any(axis=1))
-    if rows.size == 0:
-        return candidates
-    band = slice(int(rows[0]), int(rows[-1]) + 1)
-    candidates[band] &= shifted_ncc(left, warped, fit, band, int(config.window_px)) \
-        > fit.ncc[band]
-    return candidates
-
-
 def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
               px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -421,7 +400,8 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
 
     Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
     at least ``config.parallax_threshold_px`` of residual parallax. ``beyond`` ((h, w) bool,
-    :func:`_beyond_linear_range`) marks pixels whose one-step shift is not trusted.
+    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose one-step
+    shift is not trusted.
     """
     threshold = float(config.parallax_threshold_px)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)

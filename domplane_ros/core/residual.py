@@ -195,3 +195,39 @@ def shifted_ncc(left: np.ndarray, warped: np.ndarray, fit: LocalFit, rows: slice
     np.maximum(norm, np.float32(1e-6), out=norm)
     ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
     return ncc[rows.start - top:rows.stop - top]
+
+
+def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, window: int,
+                        measurable: np.ndarray, ncc_threshold: float,
+                        linear_range_px: float) -> np.ndarray:
+    """Return (h, w) bool: small one-step shifts that the coarse flow's shift explains better.
+
+    The one-step estimate holds within ``linear_range_px`` of zero. A window moved by
+    several pixels can still correlate at zero shift (a smooth box face: 0.7-0.94 on the
+    tuning scenes, where the ground gives 0.94-1) and then measures a small shift. Where the
+    coarse flow puts the shift beyond the linear range, the window is correlated again at
+    the flow's shift (:func:`shifted_ncc`): where it agrees better there than at zero, the
+    small shift is not to be trusted (docs/MASK.md, round 8).
+
+    Args:
+        left: (h, w) uint8 left image at the working scale.
+        warped: (h, w) uint8 right image warped into the left view.
+        fit: Their :func:`local_fit`.
+        window: Side of the fit's square window, pixels.
+        measurable: (h, w) bool pixels whose shift could be measured at all.
+        ncc_threshold: Zero-shift NCC a small shift needs to be trusted.
+        linear_range_px: The one-step estimate's range, working pixels.
+
+    Returns:
+        (h, w) bool, pixels with a small, trusted-looking shift that the flow's shift beats.
+
+    """
+    candidates = measurable & (np.abs(fit.shift) < linear_range_px)
+    candidates &= fit.ncc >= np.float32(ncc_threshold)
+    candidates &= np.abs(fit.flow_shift) >= linear_range_px
+    rows = np.flatnonzero(candidates.any(axis=1))
+    if rows.size == 0:
+        return candidates
+    band = slice(int(rows[0]), int(rows[-1]) + 1)
+    candidates[band] &= shifted_ncc(left, warped, fit, band, window) > fit.ncc[band]
+    return candidates

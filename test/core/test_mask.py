@@ -404,8 +404,9 @@ def test_box_faces_beyond_the_linear_range_are_not_plane(frames, monkeypatch):
     box_plane, box_obstacle, ground_obstacle = pooled()
     assert box_plane < 0.030 and box_obstacle > 0.898
     assert ground_obstacle < 0.016
-    monkeypatch.setattr(mask, '_beyond_linear_range',
-                        lambda left, warped, fit, valid, config: np.zeros(valid.shape, bool))
+    monkeypatch.setattr(mask, 'beyond_linear_range',
+                        lambda left, warped, fit, window, measurable, ncc, linear:
+                        np.zeros(measurable.shape, bool))
     before = pooled()
     assert before[0] > 0.033 and before[1] < 0.893
 
