@@ -24,6 +24,7 @@ _REGULARISER = 2.0
 # DIS settings over the ultrafast preset (see _dis_flow).
 _DIS_FINEST_SCALE = 1
 _DIS_PATCH_STRIDE = 8
+_SQUARE_3 = np.ones((3, 3), np.uint8)
 # Working images smaller than twice this (pixels) get DIS at their own size, smaller than
 # it none.
 _DIS_MIN_SIZE = 32
@@ -206,8 +207,11 @@ def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, win
     several pixels can still correlate at zero shift (a smooth box face: 0.7-0.94 on the
     tuning scenes, where the ground gives 0.94-1) and then measures a small shift. Where the
     coarse flow puts the shift beyond the linear range, the window is correlated again at
-    the flow's shift (:func:`shifted_ncc`): where it agrees better there than at zero, the
-    small shift is not to be trusted (docs/MASK.md, round 8).
+    the flow's shift (:func:`shifted_ncc`): where it agrees better there than the best of the
+    pixel's and its eight neighbours' windows at zero shift, the small shift is not to be
+    trusted (docs/MASK.md, round 8). The neighbours' windows keep the ground beside an
+    obstacle: its own window reaches over the obstacle's edge and can match better at the
+    obstacle's shift.
 
     Args:
         left: (h, w) uint8 left image at the working scale.
@@ -229,5 +233,8 @@ def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, win
     if rows.size == 0:
         return candidates
     band = slice(int(rows[0]), int(rows[-1]) + 1)
-    candidates[band] &= shifted_ncc(left, warped, fit, band, window) > fit.ncc[band]
+    # The zero shift's best window within a pixel (a 3 x 3 maximum of its NCC): next to an
+    # obstacle's edge a ground pixel's own window reaches over the edge, a neighbour's need not.
+    zero = cv2.dilate(fit.ncc, _SQUARE_3)[band]
+    candidates[band] &= shifted_ncc(left, warped, fit, band, window) > zero
     return candidates

@@ -388,9 +388,9 @@ def test_shifted_ncc_finds_the_flows_shift():
 def test_box_faces_beyond_the_linear_range_are_not_plane(frames, monkeypatch):
     # Smooth box faces far off the plane can still correlate at zero shift (0.7-0.94) and
     # measure a small one-step shift; the coarse flow's shift matches them better (round
-    # 8). Pooled over the eight frames: box pixels marked plane 3.6 % without the test, 2.6 %
-    # with it; marked obstacle 88.8 % -> 90.5 %; visible ground marked obstacle 1.33 % ->
-    # 1.47 %.
+    # 8). Pooled over the eight frames: box pixels marked plane 3.6 % without the test, 2.8 %
+    # with it; marked obstacle 88.8 % -> 90.0 %; visible ground marked obstacle 1.33 % ->
+    # 1.36 % (1.47 % when a ground pixel's own window alone stood for the zero shift).
     def pooled() -> tuple[float, float, float]:
         counts = np.zeros(5)
         for frame in frames:
@@ -402,13 +402,13 @@ def test_box_faces_beyond_the_linear_range_are_not_plane(frames, monkeypatch):
         return counts[0] / counts[2], counts[1] / counts[2], counts[3] / counts[4]
 
     box_plane, box_obstacle, ground_obstacle = pooled()
-    assert box_plane < 0.030 and box_obstacle > 0.898
-    assert ground_obstacle < 0.016
+    assert box_plane < 0.032 and box_obstacle > 0.895
+    assert ground_obstacle < 0.0145
     monkeypatch.setattr(mask, 'beyond_linear_range',
                         lambda left, warped, fit, window, measurable, ncc, linear:
                         np.zeros(measurable.shape, bool))
     before = pooled()
-    assert before[0] > 0.033 and before[1] < 0.893
+    assert before[0] > 0.034 and before[1] < 0.891
 
 
 def test_plain_box_face_is_not_filled_as_plane():
