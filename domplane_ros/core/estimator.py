@@ -34,6 +34,7 @@ from dataclasses import replace
 from typing import Any
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
+from domplane_ros.core.basin import far_start, start_nearness
 from domplane_ros.core.homography import (apply_homography, as_homography, as_points,
                                           check_homography, MIN_W, normalise_scale,
                                           NormalisedRefiner, point_set_reason)
@@ -67,22 +68,13 @@ def _options(options: EstimatorConfig | None, overrides: dict[str, Any]) -> Esti
 # Potentials whose scale is always graduated (GNC): from ``gnc_start_px`` down to the
 # threshold.
 GRADUATED = ('geman_mcclure',)
-# Potentials graduated only from a warm start that looks far (:meth:`TwoStep.start_looks_far`).
+# Potentials graduated only from a warm start that does not look near (`core/basin.py`).
 # Graduating the truncated quadratic always widens its basin on point sets (0 % -> 95-100 %
 # converged from 20 px corner displacements, spread, clustered, half off-plane, 30 % missing,
 # sparse) but from the prior's candidates and from good starts on rendered pairs its wide
 # stages slide into periodic look-alikes (cold start solved 73 % -> 47 %, planks 64 % -> 21 %,
 # one run on seeds 0-29): so only a far warm start is graduated.
 GRADUATED_WHEN_FAR = ('truncated_quadratic',)
-# A start looks far when its support (features within the threshold of their closest partner)
-# is below this multiple of the mean support of the same start shifted by
-# FAR_SHIFT_THRESHOLDS thresholds up, down, left and right (the support by chance).
-FAR_SUPPORT_RATIO = 2.5
-FAR_SHIFT_THRESHOLDS = 4.0
-# With at least this many points, the far-start test looks at about this many of them.
-FAR_SAMPLE_POINTS = 128
-# The start itself, then its shifts right, left, down and up (times the shift).
-_FAR_OFFSETS = np.array([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])
 
 
 def can_widen(options: EstimatorConfig) -> bool:
@@ -363,39 +355,12 @@ class TwoStep:
         tree = cKDTree(right) if right.shape[0] else None
         return cls(left, right, tree, left_seg, LineMatcher(right_seg), line_weight)
 
-    def start_looks_far(self, h: np.ndarray, threshold_px: float) -> bool:
-        """Return whether the start ``h`` has no more support than a start off by chance.
+    def start_nearness(self, h: np.ndarray, threshold_px: float) -> str:
+        """Say how near the start ``h`` looks: ``'near'``, ``'doubtful'`` or ``'far'``.
 
-        The support is the fraction of features whose prediction lies within
-        ``threshold_px`` of its closest partner. A start near the plane has several times the
-        support it has when its predictions are shifted by ``FAR_SHIFT_THRESHOLDS``
-        thresholds (the support by chance, which clustered or dense features raise); a start
-        20 px off does not.
-
-        Args:
-            h: (3, 3) float64 start.
-            threshold_px: The robust threshold, pixels.
-
+        See :func:`domplane_ros.core.basin.start_nearness`.
         """
-        if self.n_points >= FAR_SAMPLE_POINTS:
-            # Points only, an evenly strided sample: a fraction of a warm run's cost.
-            step = max(1, self.n_points // FAR_SAMPLE_POINTS)
-            pred = apply_homography(h, self.left[::step])
-            # The start and its four shifts in one tree query (each point's answer is its own).
-            shift = FAR_SHIFT_THRESHOLDS * threshold_px
-            near = (self.tree.query(pred[None] + _FAR_OFFSETS[:, None] * shift,
-                                    distance_upper_bound=threshold_px)[0] < threshold_px)
-            support = near.mean(axis=1)
-            return bool(support[0] < FAR_SUPPORT_RATIO * np.mean(support[1:]))
-        else:
-            pred = self.apply(h)
-
-            def supported(p: np.ndarray) -> float:
-                return float(np.mean(self.match(p, threshold_px)[0] < threshold_px))
-        shift = FAR_SHIFT_THRESHOLDS * threshold_px
-        chance = np.mean([supported(pred + offset) for offset in (
-            (shift, 0.0), (-shift, 0.0), (0.0, shift), (0.0, -shift))])
-        return bool(supported(pred) < FAR_SUPPORT_RATIO * chance)
+        return start_nearness(self, h, threshold_px)
 
     def estimate(self, init: np.ndarray, options: EstimatorConfig, *,
                  widen: bool | None = None) -> PlaneEstimate | FailedEstimate:
@@ -405,10 +370,14 @@ class TwoStep:
             init: (3, 3) float64 initial homography.
             options: Estimator settings (its ``line_weight`` was fixed at construction).
             widen: Whether the truncated quadratic is graduated from ``options.gnc_start_px``
-                (GNC), which widens its basin. None (a warm start): only when the start
-                looks far (:meth:`start_looks_far`) or the plain run fails. False: never (the
-                prior's candidates, whose search covers far starts and whose look-alikes a
-                wide stage slides into). True: always. Other potentials ignore it.
+                (GNC), which widens its basin. None (a warm start): by how near the start
+                looks (:meth:`start_nearness`): near, plain (and widened only if that fails);
+                far, widened in a multi-start (:func:`domplane_ros.core.basin.far_start`);
+                doubtful, both, the result of lowest energy kept. False: never (the prior's
+                candidates, whose search covers far starts and whose look-alikes a wide stage
+                slides into). True: one graduated run from ``init`` (the pipeline's retry of a
+                refused warm plane: there the multi-start's moved starts reached a look-alike
+                after a cut that passed the verification). Other potentials ignore it.
 
         Returns:
             :class:`PlaneEstimate`, or :class:`FailedEstimate` for a singular or non-finite
@@ -421,10 +390,12 @@ class TwoStep:
         h = normalise_scale(init)
         if not can_widen(options) or widen is not None:
             return self._estimate_from(h, options, can_widen(options) and bool(widen))
-        if self.start_looks_far(h, options.threshold_px):
-            return self._estimate_from(h, options, True)
-        result = self._estimate_from(h, options, False)
-        return result if result.ok else self._estimate_from(h, options, True)
+        nearness = self.start_nearness(h, options.threshold_px)
+        plain = None if nearness == 'far' else self._estimate_from(h, options, False)
+        if nearness == 'near' and plain.ok:
+            return plain
+        return far_start(self, h, lambda start: self._estimate_from(start, options, True),
+                         options, plain)
 
     def _estimate_from(self, h: np.ndarray, options: EstimatorConfig, far: bool
                        ) -> PlaneEstimate | FailedEstimate:

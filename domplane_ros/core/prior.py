@@ -182,14 +182,14 @@ def screen_candidates(candidates: np.ndarray, left_points: np.ndarray, right_tre
         (M,) float64 screening energies.
 
     """
-    pred = _predict_all(candidates, left_points)
+    x, y = _predict_all(candidates, left_points)
     m = candidates.shape[0]
     if m <= SCREEN_EXACT:
-        return _exact_energy(pred, right_tree, threshold_px)
-    coarse = coarse_screening(pred, right_tree.data, threshold_px)
+        return _exact_energy(x, y, right_tree, threshold_px)
+    coarse = _coarse_energy(x, y, right_tree.data, threshold_px)
     best = np.argsort(coarse, kind='stable')[:SCREEN_EXACT]
     costs = coarse + (1.0 + left_points.shape[0] * threshold_px ** 2)
-    costs[best] = _exact_energy(pred[best], right_tree, threshold_px)
+    costs[best] = _exact_energy(x[best], y[best], right_tree, threshold_px)
     return costs
 
 
@@ -200,22 +200,30 @@ SCREEN_EXACT = 64
 _SCREEN_GRID = 320
 
 
-def _predict_all(candidates: np.ndarray, left_points: np.ndarray) -> np.ndarray:
-    """Return (M, N, 2) predictions of every left point under every candidate."""
+def _predict_all(candidates: np.ndarray, left_points: np.ndarray
+                 ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (M, N) x and y predictions of every left point under every candidate.
+
+    Two contiguous arrays rather than one (M, N, 2): the passes below read each coordinate
+    on its own (the same values as before, about a fifth less screening time).
+    """
     n = left_points.shape[0]
     homogeneous = candidates @ np.column_stack([left_points, np.ones(n)]).T  # (M, 3, N)
     w = homogeneous[:, 2]
     w = np.where(np.abs(w) < MIN_W, MIN_W, w)  # as apply_homography: far, finite
-    out = np.empty((candidates.shape[0], n, 2))
-    np.divide(homogeneous[:, 0], w, out=out[..., 0])
-    np.divide(homogeneous[:, 1], w, out=out[..., 1])
-    return np.clip(out, -FAR_PX, FAR_PX, out=out)
+    x = np.divide(homogeneous[:, 0], w)
+    y = np.divide(homogeneous[:, 1], w)
+    np.clip(x, -FAR_PX, FAR_PX, out=x)
+    np.clip(y, -FAR_PX, FAR_PX, out=y)
+    return x, y
 
 
-def _exact_energy(pred: np.ndarray, right_tree: cKDTree, threshold_px: float) -> np.ndarray:
-    """Return (M,) ``sum min(d, t)^2`` of (M, N, 2) predictions by one tree query."""
-    m, n = pred.shape[:2]
-    d, _ = right_tree.query(pred.reshape(-1, 2), distance_upper_bound=threshold_px)
+def _exact_energy(x: np.ndarray, y: np.ndarray, right_tree: cKDTree, threshold_px: float
+                  ) -> np.ndarray:
+    """Return (M,) ``sum min(d, t)^2`` of the (M, N) predictions by one tree query."""
+    m, n = x.shape
+    d, _ = right_tree.query(np.stack([x.ravel(), y.ravel()], axis=1),
+                            distance_upper_bound=threshold_px)
     d = np.minimum(d, threshold_px).reshape(m, n)
     return np.sum(d * d, axis=1)
 
@@ -235,6 +243,13 @@ def coarse_screening(pred: np.ndarray, right_points: np.ndarray, threshold_px: f
         threshold_px: Truncation ``t``, pixels.
 
     """
+    return _coarse_energy(np.ascontiguousarray(pred[..., 0]),
+                          np.ascontiguousarray(pred[..., 1]), right_points, threshold_px)
+
+
+def _coarse_energy(x: np.ndarray, y: np.ndarray, right_points: np.ndarray,
+                   threshold_px: float) -> np.ndarray:
+    """Return :func:`coarse_screening` of the (M, N) predictions ``x`` and ``y``."""
     low = right_points.min(axis=0) - threshold_px
     high = right_points.max(axis=0) + threshold_px
     cell = max(1.0, float(np.max(high - low)) / _SCREEN_GRID)
@@ -247,12 +262,20 @@ def coarse_screening(pred: np.ndarray, right_points: np.ndarray, threshold_px: f
     # grid is at least t from every right point, so its index is clipped onto the border.
     table = np.full((rows + 2, cols + 2), threshold_px ** 2)
     table[1:-1, 1:-1] = np.minimum(dist, threshold_px) ** 2
-    grid = (pred - (low - cell)) / cell
-    np.rint(grid, out=grid)
-    np.clip(grid, 0, (cols + 1, rows + 1), out=grid)
-    index = grid.astype(np.intp)
-    flat = index[..., 1] * (cols + 2) + index[..., 0]
+    origin = low - cell
+    flat = _cell_index(y, origin[1], cell, rows + 1)
+    flat *= cols + 2
+    flat += _cell_index(x, origin[0], cell, cols + 1)
     return np.sum(table.ravel()[flat], axis=1)
+
+
+def _cell_index(coordinate: np.ndarray, origin: float, cell: float, last: int) -> np.ndarray:
+    """Return the (M, N) intp cells of one coordinate, clipped onto the border [0, last]."""
+    grid = np.subtract(coordinate, origin)
+    grid /= cell
+    np.rint(grid, out=grid)
+    np.clip(grid, 0, last, out=grid)
+    return grid.astype(np.intp)
 
 
 class PriorSearch:

@@ -105,11 +105,12 @@ def bench_basin_kinds(first_seed: int, runs: int) -> None:
     print(f'\nBasin with the default settings (estimator.* defaults), initial corner '
           f'displacement 20 px, seeds {first_seed}..{first_seed + runs - 1}, success = mean '
           'transfer error < 1 px')
-    print(f'{"point set":15s} converged   far starts graduated   median ms')
+    print(f'{"point set":15s} converged   returned (precision)   far starts graduated   '
+          'median ms')
     for kind, options in POINT_SET_KINDS.items():
         options = dict(options)
         n_points = int(options.pop('n_points', 500))
-        ok = far = 0
+        ok = far = returned = 0
         times = []
         for seed in progress(range(first_seed, first_seed + runs), kind):
             rng = np.random.default_rng(seed)
@@ -119,10 +120,12 @@ def bench_basin_kinds(first_seed: int, runs: int) -> None:
             est = estimate_plane(scene.left, scene.right, h0)
             times.append(time.perf_counter() - t)
             far += bool(est.stage_trace.size and est.stage_trace.max() > 0)
+            returned += est.ok
             ok += est.ok and plane_error_px(est.homography, scene.homography,
                                             scene.left[scene.on_plane]) < 1.0
-        print(f'{kind:15s} {100 * ok / runs:8.1f} %   {far:4d} / {runs:<4d}           '
-              f'{1e3 * np.median(times):7.1f}')
+        precision = f'{100 * ok / returned:5.1f} %' if returned else '    -  '
+        print(f'{kind:15s} {100 * ok / runs:8.1f} %   {returned:4d} ({precision})        '
+              f'{far:4d} / {runs:<4d}           {1e3 * np.median(times):7.1f}')
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
+from domplane_ros.core import basin
 from domplane_ros.core.estimator import (can_widen, estimate_plane, FailedEstimate,
                                          gnc_scales, PlaneEstimate, TwoStep)
 from domplane_ros.core.homography import apply_homography, fit_homography
@@ -207,11 +208,12 @@ def test_geman_mcclure_converges_from_20_px_on_every_kind_of_point_set(kind):
 
 @pytest.mark.parametrize('kind', sorted(BASIN_KINDS))
 def test_default_settings_converge_from_20_px_on_every_kind_of_point_set(kind):
-    # The issue's target with the default settings (truncated quadratic, graduated because
-    # the start looks far): at least 95 % on every kind. Seeds 30000-30019 are the ones the
-    # far-start test (FAR_SUPPORT_RATIO) was tuned on; held-out seeds are in docs/BENCHMARKS.md
-    # (python -m domplane_ros.tools.bench --basin-kinds-seed 60000).
-    assert _basin_converged(kind) >= 19, kind
+    # The issue's target with the default settings (truncated quadratic, a far start
+    # graduated in a multi-start, core/basin.py): at least 95 % on every kind; on these tuning
+    # seeds (30000-30019) every scene converges, where one graduated run missed one of 20
+    # spread, clustered and sparse scenes. Held-out seeds are in docs/BENCHMARKS.md
+    # (python -m domplane_ros.tools.bench --basin-kinds-only --basin-kinds-seed 70000).
+    assert _basin_converged(kind) == 20, kind
 
 
 def test_far_start_is_graduated_and_good_start_is_not():
@@ -224,13 +226,53 @@ def test_far_start_is_graduated_and_good_start_is_not():
         problem = TwoStep.from_features(scene.left, scene.right)
         near = displace_homography(scene.homography, 2.0, rng)
         far = displace_homography(scene.homography, 20.0, rng)
-        assert not problem.start_looks_far(near, 3.0)
-        assert problem.start_looks_far(far, 3.0)
+        assert problem.start_nearness(near, 3.0) == 'near'
+        assert problem.start_nearness(far, 3.0) == 'far'
         options = EstimatorConfig()
         assert np.all(problem.estimate(near, options).stage_trace == 0)
         assert problem.estimate(far, options).stage_trace.max() == 3
         assert np.all(problem.estimate(far, options, widen=False).stage_trace == 0)
         assert problem.estimate(near, options, widen=True).stage_trace.max() == 3
+
+
+def _hard_start(kind, seed):
+    """Return the problem, the 20 px start and the truth of a basin scene of ``kind``."""
+    options = dict(BASIN_KINDS[kind])
+    rng = np.random.default_rng(seed)
+    scene = point_scene(rng, options.pop('n_points', 500), **options)
+    h0 = displace_homography(scene.homography, 20.0, rng)
+    return TwoStep.from_features(scene.left, scene.right), h0, scene
+
+
+def _error_px(result, scene):
+    if not result.ok:
+        return np.inf
+    return plane_error_px(result.homography, scene.homography, scene.left[scene.on_plane])
+
+
+@pytest.mark.parametrize('kind, seed', [('sparse_150', 30018), ('sparse_150', 30031),
+                                        ('missing_30', 30028), ('missing_30', 30060)])
+def test_partly_aligned_far_start_is_doubtful_and_widened(kind, seed):
+    # Sparse sets have little support by chance, so a far start partly aligned passed the
+    # support-ratio test alone and the plain run slid into a wrong plane (tuning seeds where
+    # it did). Without the excess-support rule (NEAR_EXCESS_SUPPORT) these starts are 'near'.
+    problem, h0, scene = _hard_start(kind, seed)
+    options = EstimatorConfig()
+    assert problem.start_nearness(h0, options.threshold_px) == 'doubtful'
+    assert _error_px(problem.estimate(h0, options, widen=False), scene) > 3.0
+    assert _error_px(problem.estimate(h0, options), scene) < 1.0
+
+
+@pytest.mark.parametrize('seed', [30008, 30031, 30071])
+def test_far_start_multi_start_finds_the_plane_one_graduated_run_misses(seed, monkeypatch):
+    # Clustered sets: one graduated run from the far start slides into a wrong plane (tuning
+    # seeds where it did); the multi-start (the start moved 10 px four ways, lowest energy at
+    # the threshold) finds the true one. With no shift every start is the same one run.
+    problem, h0, scene = _hard_start('clustered', seed)
+    options = EstimatorConfig()
+    assert _error_px(problem.estimate(h0, options), scene) < 1.0
+    monkeypatch.setattr(basin, 'FAR_START_SHIFT_PX', 0.0)
+    assert _error_px(problem.estimate(h0, options), scene) > 3.0
 
 
 def test_only_geman_mcclure_is_graduated_and_it_ends_at_the_threshold():

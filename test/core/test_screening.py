@@ -2,13 +2,25 @@
 
 from __future__ import annotations
 
+import functools
+
+import cv2
 from domplane_ros.config import FeatureConfig, PriorConfig
 from domplane_ros.core import prior
 from domplane_ros.core.features import detect_corners
+from domplane_ros.core.homography import FAR_PX, MIN_W
 from domplane_ros.sim.generators import random_scene
 import numpy as np
 import pytest
 from scipy.spatial import cKDTree
+
+
+@functools.lru_cache(maxsize=2)
+def _features(seed):
+    """Return a rendered scene's left corners and a tree over its right corners (cached)."""
+    frame = random_scene(seed)
+    config = FeatureConfig()
+    return detect_corners(frame.left, config), cKDTree(detect_corners(frame.right, config))
 
 
 def _exact(candidates, left, tree, threshold):
@@ -27,10 +39,7 @@ def test_the_best_candidates_are_ranked_as_the_exact_energy_ranks_them(seed):
 
     The first 16 of the ranking, and their energies, are those of the exact screening.
     """
-    frame = random_scene(300 + seed)
-    config = FeatureConfig()
-    left = detect_corners(frame.left, config)
-    tree = cKDTree(detect_corners(frame.right, config))
+    left, tree = _features(300 + seed)
     candidates = prior.prior_candidates(PriorConfig(), 640, 480)
     assert candidates.shape[0] > prior.SCREEN_EXACT
     costs = prior.screen_candidates(candidates, left, tree, 12.0)
@@ -41,6 +50,49 @@ def test_the_best_candidates_are_ranked_as_the_exact_energy_ranks_them(seed):
     # The others rank after every exactly screened one.
     rest = np.setdiff1d(np.arange(len(costs)), np.argsort(costs)[:prior.SCREEN_EXACT])
     assert costs[rest].min() > np.sort(costs)[prior.SCREEN_EXACT - 1]
+
+
+def _reference_screening(candidates, left, tree, threshold):
+    """Return the screening energies as computed before the seventh round, for comparison.
+
+    One (M, N, 2) prediction array, the coarse pass on it, the exact pass on its best
+    SCREEN_EXACT: the search's ranking and energies must not change with the layout.
+    """
+    hom = candidates @ np.column_stack([left, np.ones(len(left))]).T
+    w = hom[:, 2]
+    w = np.where(np.abs(w) < MIN_W, MIN_W, w)
+    pred = np.clip(np.stack([hom[:, 0] / w, hom[:, 1] / w], axis=-1), -FAR_PX, FAR_PX)
+    right = tree.data
+    low, high = right.min(axis=0) - threshold, right.max(axis=0) + threshold
+    cell = max(1.0, float(np.max(high - low)) / 320)
+    cols, rows = np.ceil((high - low) / cell).astype(int) + 1
+    occupied = np.full((rows, cols), 255, np.uint8)
+    idx = np.rint((right - low) / cell).astype(int)
+    occupied[idx[:, 1], idx[:, 0]] = 0
+    dist = cell * cv2.distanceTransform(occupied, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    table = np.full((rows + 2, cols + 2), threshold ** 2)
+    table[1:-1, 1:-1] = np.minimum(dist, threshold) ** 2
+    grid = np.clip(np.rint((pred - (low - cell)) / cell), 0, (cols + 1, rows + 1)).astype(int)
+    coarse = np.sum(table[grid[..., 1], grid[..., 0]], axis=1)
+    best = np.argsort(coarse, kind='stable')[:prior.SCREEN_EXACT]
+    costs = coarse + (1.0 + len(left) * threshold ** 2)
+    d, _ = tree.query(pred[best].reshape(-1, 2), distance_upper_bound=threshold)
+    d = np.minimum(d, threshold).reshape(len(best), -1)
+    costs[best] = np.sum(d * d, axis=1)
+    return costs
+
+
+def test_screening_gives_the_reference_energies_bit_for_bit():
+    """The prior's and the swapped cameras' candidates: the same energies, so the same starts."""
+    left, tree = _features(301)
+    candidates = prior.prior_candidates(PriorConfig(), 640, 480)
+    for cands in (candidates, prior.swapped_candidates(candidates)):
+        costs = prior.screen_candidates(cands, left, tree, 12.0)
+        reference = _reference_screening(cands, left, tree, 12.0)
+        np.testing.assert_array_equal(costs, reference)
+        # A wrong cell index (x and y exchanged) would change the best starts: checked too.
+        np.testing.assert_array_equal(np.argsort(costs, kind='stable')[:6],
+                                      np.argsort(reference, kind='stable')[:6])
 
 
 def test_coarse_distances_are_within_a_cell_of_the_true_ones():

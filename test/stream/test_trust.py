@@ -7,7 +7,6 @@ Every configuration here is the documented default (no prior built from a scene'
 from __future__ import annotations
 
 from dataclasses import replace
-import math
 
 from domplane_ros.config import PlaneNodeConfig, VerificationSettings
 from domplane_ros.core import verification
@@ -289,7 +288,7 @@ def test_the_published_winner_is_polished_on_its_closest_features(monkeypatch, s
 
     monkeypatch.setattr(CandidateWork, 'tightened', spy)
     # The photometric refinement that follows is off here (tested on its own below).
-    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_MIN_GAIN', math.inf)
+    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_FINISH_ROUNDS', 0)
     frame = random_scene(seed)
     result = PlanePipeline().process(frame.left, frame.right, 0)
     assert result.ok, result.reason
@@ -316,7 +315,7 @@ def test_a_biased_winner_is_moved_onto_the_floor_photometrically(monkeypatch):
     frame = rough_rig(random_scene(15), random_rig_error(np.random.default_rng((15, 77))))
     result = PlanePipeline().process(frame.left, frame.right, 0)
     assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
-    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_MIN_GAIN', math.inf)
+    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_FINISH_ROUNDS', 0)
     without = PlanePipeline().process(frame.left, frame.right, 0)
     assert without.ok and plane_error_px(frame, without.homography) > 2.0
 
