@@ -136,7 +136,9 @@ def far_start(problem: Any, h: np.ndarray, run: Callable[[np.ndarray], Any],
         start = h if not offset.any() else _shifted(h, FAR_START_SHIFT_PX * offset)
         result = run(start)
         if not result.ok:
-            first_failure = first_failure or result
+            # A failure is false in a boolean context: ``first_failure or result`` kept the last.
+            if first_failure is None:
+                first_failure = result
             continue
         agrees = any(_max_distance(box, result.homography, other.homography) < FAR_AGREE_PX
                      for _, other in done)

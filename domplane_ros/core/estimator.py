@@ -371,8 +371,9 @@ class TwoStep:
             options: Estimator settings (its ``line_weight`` was fixed at construction).
             widen: Whether the truncated quadratic is graduated from ``options.gnc_start_px``
                 (GNC), which widens its basin. None (a warm start): by how near the start
-                looks (:meth:`start_nearness`): near, plain (and widened only if that fails);
-                far, widened in a multi-start (:func:`domplane_ros.core.basin.far_start`);
+                looks (:meth:`start_nearness`): near, plain (and the far start's multi-start
+                only if that fails); far, widened in a multi-start
+                (:func:`domplane_ros.core.basin.far_start`);
                 doubtful, both, the result of lowest energy kept. False: never (the prior's
                 candidates, whose search covers far starts and whose look-alikes a wide stage
                 slides into). True: one graduated run from ``init`` (the pipeline's retry of a

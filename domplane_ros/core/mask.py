@@ -9,8 +9,9 @@ above the plane and falls with its distance. The shift is a dense one-step, one-
 Lucas-Kanade estimate at zero shift (box-filtered gradient products, gain and offset removed
 by the local means, regularised so that windows without texture across the epipolar direction
 fall back to zero), trusted up to one pixel at the working scale where the zero-shift
-normalised correlation (NCC) also holds; beyond that a clearly failed NCC says the pixel is off
-the plane without measuring by how much.
+normalised correlation (NCC) also holds, unless the coarse DIS flow puts the shift beyond that
+range and the window matches better at the flow's shift; beyond that a clearly failed NCC says
+the pixel is off the plane without measuring by how much.
 
 Three labels with a physical meaning:
 
@@ -46,7 +47,7 @@ from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
-from domplane_ros.core.residual import flow_shift, local_fit, LocalFit
+from domplane_ros.core.residual import beyond_linear_range, flow_shift, local_fit, LocalFit
 from domplane_ros.core.scratch import constant
 import numpy as np
 
@@ -318,7 +319,11 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     """
     flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
     fit = local_fit(left, warped, int(config.window_px), coarse)
-    labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config)
+    measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
+    beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
+                                 float(config.ncc_threshold), _LINEAR_RANGE_PX)
+    labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
+                                            beyond)
     rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
     _clean(labels, valid, decidable, int(config.morph_px))
@@ -389,17 +394,21 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
 
 
 def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
-              px_per_working: float, config: MaskConfig
+              px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None
               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the working-scale labels, the parallax image and the decidable pixels.
 
     Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
-    at least ``config.parallax_threshold_px`` of residual parallax.
+    at least ``config.parallax_threshold_px`` of residual parallax. ``beyond`` ((h, w) bool,
+    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose one-step
+    shift is not trusted.
     """
     threshold = float(config.parallax_threshold_px)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
     small = measurable & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
     small &= fit.ncc >= float(config.ncc_threshold)
+    if beyond is not None:
+        small &= ~beyond
     residual = fit.flow_shift  # in place: the fit is not read again
     _copy_where(fit.shift, small, residual)
     residual *= np.float32(px_per_working)

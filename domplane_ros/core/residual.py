@@ -3,7 +3,9 @@
 :func:`local_fit` gives, per pixel of the working image, the one-step one-dimensional
 Lucas-Kanade shift along the epipolar direction (the image x axis for the prior's head) with
 the window statistics that say whether to trust it (zero-shift normalised correlation, left
-window variance), and the coarse shift of DIS optical flow for large parallax. The float
+window variance), and the coarse shift of DIS optical flow for large parallax;
+:func:`shifted_ncc` the correlation of the same windows with the warped image moved by a
+per-pixel shift (the coarse flow's, to test it against the zero shift). The float
 images are this thread's :func:`~domplane_ros.core.scratch.scratch` arrays: a
 :class:`LocalFit` is valid until the next call in the same thread.
 """
@@ -22,6 +24,7 @@ _REGULARISER = 2.0
 # DIS settings over the ultrafast preset (see _dis_flow).
 _DIS_FINEST_SCALE = 1
 _DIS_PATCH_STRIDE = 8
+_SQUARE_3 = np.ones((3, 3), np.uint8)
 # Working images smaller than twice this (pixels) get DIS at their own size, smaller than
 # it none.
 _DIS_MIN_SIZE = 32
@@ -38,12 +41,14 @@ class LocalFit:
         variance: (h, w) float32 grey-level variance of the left window.
         flow_shift: (h, w) float32 signed residual parallax from DIS optical flow, working
             pixels: coarse, but not limited to small shifts.
+        mean: (h, w) float32 grey-level mean of the left window.
     """
 
     shift: np.ndarray
     ncc: np.ndarray
     variance: np.ndarray
     flow_shift: np.ndarray
+    mean: np.ndarray
 
 
 def _dis_flow() -> cv2.DISOpticalFlow:
@@ -113,7 +118,8 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
     shift = cv2.divide(num, den, dst=num)
     if coarse is None:
         coarse = flow_shift(left, warped)
-    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse)
+    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse,
+                    mean=mean_a)
 
 
 def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int],
@@ -144,3 +150,91 @@ def flow_shift(left: np.ndarray, warped: np.ndarray,
                      dst=scratch('flow_x', left.shape), interpolation=cv2.INTER_LINEAR)
     out *= np.float32(-2.0)
     return out
+
+
+def shifted_ncc(left: np.ndarray, warped: np.ndarray, fit: LocalFit, rows: slice,
+                window: int) -> np.ndarray:
+    """Return the NCC of the left windows with the warped image moved by the coarse flow.
+
+    The warped image is sampled at ``x - round(fit.flow_shift)`` (a point nearer than the
+    plane with residual parallax ``r`` shows at ``x - r``; the nearest pixel, as the flow is
+    coarse), so where the flow is the true residual parallax the windows agree. Computed on
+    ``rows`` only, with the window's reach around them; the left windows' mean and variance
+    are the fit's. Its own scratch arrays: the fit's stay untouched; the result is one of
+    them, valid until the next call in the same thread.
+
+    Args:
+        left: (h, w) uint8 left image at the working scale.
+        warped: (h, w) uint8 right image warped into the left view.
+        fit: The :func:`local_fit` of these images (``mean``, ``variance``, ``flow_shift``).
+        rows: The rows wanted, ``slice(start, stop)`` within ``0 .. h``.
+        window: Side of the fit's square window, pixels.
+
+    Returns:
+        (stop - start, w) float32 normalised correlation of those rows.
+
+    """
+    height, width = left.shape
+    half = window // 2
+    top, bottom = max(0, rows.start - half), min(height, rows.stop + half)
+    shape = (bottom - top, width)
+    map_x = cv2.subtract(np.arange(width, dtype=np.float32)[None, :].repeat(shape[0], axis=0),
+                         fit.flow_shift[top:bottom], dst=scratch('shifted_x', shape))
+    map_y = scratch('shifted_y', shape)
+    map_y[:] = np.arange(top, bottom, dtype=np.float32)[:, None]
+    moved = cv2.remap(warped, map_x, map_y, cv2.INTER_NEAREST,
+                      dst=scratch('shifted', shape, np.uint8), borderMode=cv2.BORDER_REPLICATE)
+    band = left[top:bottom]
+    size = (window, window)
+    tmp = scratch('shifted_tmp', shape)
+    mean_b = cv2.boxFilter(moved, cv2.CV_32F, size, dst=scratch('shifted_mean', shape))
+    var_b = _window_product(moved, moved, size, scratch('shifted_var', shape))
+    var_b -= cv2.multiply(mean_b, mean_b, dst=tmp)
+    cov = _window_product(band, moved, size, scratch('shifted_ncc', shape))
+    cov -= cv2.multiply(fit.mean[top:bottom], mean_b, dst=tmp)
+    norm = cv2.multiply(fit.variance[top:bottom], var_b, dst=var_b)
+    np.maximum(norm, np.float32(1e-6), out=norm)
+    ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
+    return ncc[rows.start - top:rows.stop - top]
+
+
+def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, window: int,
+                        measurable: np.ndarray, ncc_threshold: float,
+                        linear_range_px: float) -> np.ndarray:
+    """Return (h, w) bool: small one-step shifts that the coarse flow's shift explains better.
+
+    The one-step estimate holds within ``linear_range_px`` of zero. A window moved by
+    several pixels can still correlate at zero shift (a smooth box face: 0.7-0.94 on the
+    tuning scenes, where the ground gives 0.94-1) and then measures a small shift. Where the
+    coarse flow puts the shift beyond the linear range, the window is correlated again at
+    the flow's shift (:func:`shifted_ncc`): where it agrees better there than the best of the
+    pixel's and its eight neighbours' windows at zero shift, the small shift is not to be
+    trusted (docs/MASK.md, round 8). The neighbours' windows keep the ground beside an
+    obstacle: its own window reaches over the obstacle's edge and can match better at the
+    obstacle's shift.
+
+    Args:
+        left: (h, w) uint8 left image at the working scale.
+        warped: (h, w) uint8 right image warped into the left view.
+        fit: Their :func:`local_fit`.
+        window: Side of the fit's square window, pixels.
+        measurable: (h, w) bool pixels whose shift could be measured at all.
+        ncc_threshold: Zero-shift NCC a small shift needs to be trusted.
+        linear_range_px: The one-step estimate's range, working pixels.
+
+    Returns:
+        (h, w) bool, pixels with a small, trusted-looking shift that the flow's shift beats.
+
+    """
+    candidates = measurable & (np.abs(fit.shift) < linear_range_px)
+    candidates &= fit.ncc >= np.float32(ncc_threshold)
+    candidates &= np.abs(fit.flow_shift) >= linear_range_px
+    rows = np.flatnonzero(candidates.any(axis=1))
+    if rows.size == 0:
+        return candidates
+    band = slice(int(rows[0]), int(rows[-1]) + 1)
+    # The zero shift's best window within a pixel (a 3 x 3 maximum of its NCC): next to an
+    # obstacle's edge a ground pixel's own window reaches over the edge, a neighbour's need not.
+    zero = cv2.dilate(fit.ncc, _SQUARE_3)[band]
+    candidates[band] &= shifted_ncc(left, warped, fit, band, window) > zero
+    return candidates

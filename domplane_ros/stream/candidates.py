@@ -54,7 +54,7 @@ TIGHT_POLISH_MIN_PEAK = 0.97
 # their fit by up to 1-2 px; the flow has no such bias. Measured on tuning seeds 30-89 (cold
 # start, rough rigs; documented default prior): published / correct 57 / 55 and 53 / 51
 # before (refined at 320 px, taken only with a 5 % higher peak score), 57 / 57 and 53 / 53
-# after, median error 0.14 -> 0.11 px and 0.15 -> 0.13 px, no wrong plane either way. The
+# after, median error 0.14 -> 0.096 px and 0.15 -> 0.094 px, no wrong plane either way. The
 # peak score (at 160 px) cannot rank planes a few tenths of a pixel apart, so it only guards
 # against a refinement that went elsewhere.
 PHOTOMETRIC_MIN_PEAK = 0.97

@@ -41,7 +41,7 @@ RIVAL_RECHECK_UNIQUENESS = 2.25
 __all__ = ['PlaneSearch', 'propagate']
 
 Motions = tuple[np.ndarray, np.ndarray] | None
-# (problem, start, wide, widen) -> the pipeline's warm estimate from ``start``.
+# (problem, start, wide) -> the pipeline's warm estimate from ``start``.
 WarmEstimate = Callable[[TwoStep | FailedEstimate, np.ndarray, bool],
                         PlaneEstimate | FailedEstimate]
 

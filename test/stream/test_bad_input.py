@@ -222,7 +222,8 @@ def test_degenerate_inliers_are_a_failure(scene, region):
                   'pipeline.min_inlier_spread 0.02')
     assert pipeline.checks.counts['degenerate_geometry'] == 1
     # The spread check is what refuses them, and it must: without it no correct plane comes
-    # out (the patch's plane is published 23 px off the floor, the verification sees texture
+    # out (the patch's plane is published 2.8 px off the floor, 23 px before the search's
+    # winner was refined photometrically at full resolution: the verification sees texture
     # only in the patch; the band's plane is refused for another reason), and the reason no
     # longer names the degenerate geometry.
     config = PlaneNodeConfig()
@@ -230,7 +231,7 @@ def test_degenerate_inliers_are_a_failure(scene, region):
         config.pipeline, min_inlier_spread=0.0))))
     result = loose.process(left, right, STAMP0)
     assert 'degenerate geometry' not in result.reason
-    assert not result.ok or transfer_error_px(scene, result.homography) > 5.0
+    assert not result.ok or transfer_error_px(scene, result.homography) > 1.0
 
 
 def test_inlier_spread_of_collinear_patch_and_spread_points():

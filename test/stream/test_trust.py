@@ -365,6 +365,25 @@ def test_a_biased_winner_is_moved_onto_the_floor_photometrically(monkeypatch):
     assert without.ok and plane_error_px(frame, without.homography) > 2.0
 
 
+@pytest.mark.parametrize('case, name, value', [
+    ('cold 73', 'PHOTOMETRIC_MIN_PEAK', 1.05), ('rough 59', 'PHOTOMETRIC_FINISH_ROUNDS', 1)])
+def test_the_refinement_keeps_97_percent_of_the_peak_and_runs_twice(monkeypatch, case, name,
+                                                                    value):
+    # Tuning seeds published 1.0-1.3 px off before the seventh round. Cold 73: the refinement
+    # raises the peak score by 1.6 % only and moves the plane 1.31 -> 0.83 px; taken only
+    # with a 5 % higher peak score (the old rule) it is not. Rough 59: the second round moves
+    # it 1.17 -> 0.71 px; refined once, it stays over a pixel off.
+    kind, seed = case.split()
+    frame = random_scene(int(seed))
+    if kind == 'rough':
+        frame = rough_rig(frame, random_rig_error(np.random.default_rng((int(seed), 77))))
+    result = PlanePipeline().process(frame.left, frame.right, 0)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
+    monkeypatch.setattr(candidates_module, name, value)
+    without = PlanePipeline().process(frame.left, frame.right, 0)
+    assert without.ok and plane_error_px(frame, without.homography) > 1.1
+
+
 def test_a_cut_to_a_floor_of_few_corners_relocks_photometrically(monkeypatch):
     # After the cut a large checker seen close up shows 9-10 corners, fewer than
     # estimator.min_inliers: the corners cannot fix a plane, the photometric refinement of
