@@ -29,7 +29,7 @@ from collections import deque
 from dataclasses import dataclass, replace
 import math
 import statistics
-from typing import Callable, Sequence
+from typing import Any, Callable, Sequence
 
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
@@ -144,6 +144,7 @@ class TrustGate:
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
         self._coarse_planes: dict[bool, np.ndarray] = {}
+        self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
         """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
@@ -153,11 +154,13 @@ class TrustGate:
         """
         self._pair, self._working = (left, right), None
         self._coarse_planes = {}
+        self._verified = {}
 
     def end_pair(self) -> None:
         """Forget the pair of :meth:`begin_pair`."""
         self._pair = self._working = None
         self._coarse_planes = {}
+        self._verified = {}
 
     def _verify(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                 roi: Sequence[float] | None) -> PlaneVerification:
@@ -167,7 +170,15 @@ class TrustGate:
             if self._working is None or self._working.width != config.working_width_px:
                 self._working = working_pair(left, right, config)
             working = self._working
-        return verify_plane(left, right, homography, config, roi, working)
+        else:
+            return verify_plane(left, right, homography, config, roi, working)
+        # The same plane judged twice on one pair (a search picked again with its rivals
+        # refined further, a finished plane that did not move) is verified once.
+        key = (np.asarray(homography, np.float64).tobytes(),
+               None if roi is None else tuple(roi), config.working_width_px)
+        if key not in self._verified:
+            self._verified[key] = verify_plane(left, right, homography, config, roi, working)
+        return self._verified[key]
 
     def config(self, width: int) -> VerificationConfig:
         """Return the verification settings for images ``width`` pixels wide."""

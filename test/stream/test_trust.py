@@ -421,3 +421,26 @@ def test_a_floor_whose_corners_give_no_plane_is_found_photometrically(monkeypatc
     monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_ROUNDS', 0)
     without = PlanePipeline().process(frame.left, frame.right, 0)
     assert not without.ok and 'found no plane' in without.reason, without.reason
+
+
+def test_a_plane_judged_twice_on_one_pair_is_verified_once(scene, monkeypatch):
+    calls = []
+    verify = trust_module.verify_plane
+
+    def counted(*args, **kwargs):
+        calls.append(1)
+        return verify(*args, **kwargs)
+
+    monkeypatch.setattr(trust_module, 'verify_plane', counted)
+    gate = TrustGate(VerificationSettings())
+    moved = _shifted(scene.homography, 6.0)
+    gate.begin_pair(scene.left, scene.right)
+    first = [gate.judge(scene.left, scene.right, h) for h in (scene.homography, moved)]
+    again = [gate.judge(scene.left, scene.right, h) for h in (scene.homography, moved)]
+    gate.end_pair()
+    assert len(calls) == 2
+    assert [v.score for v in again] == [v.score for v in first]
+    assert first[0].accepted and not first[1].accepted
+    # Outside begin_pair / end_pair (other images may come), every judgement is verified.
+    gate.judge(scene.left, scene.right, scene.homography)
+    assert len(calls) == 3
