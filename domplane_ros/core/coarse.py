@@ -25,7 +25,8 @@ displacement over tens of pixels, and a periodic floor (tiles, planks) correlate
 period off, so the strongest peak is often an alias. The right image is therefore also aligned
 after a few more displacements: the strongest phase-correlation peaks of horizontal strips of
 the lower half (each strip smears less), at half the working width, of a ground plane's sign
-(the right camera sees the floor further left). Measured (see ``shift_peaks``).
+(the right camera sees the floor further left): :meth:`CoarseAligner.peak_candidates`, for a
+search in doubt only (they cost a dense flow each).
 """
 
 from __future__ import annotations
@@ -82,13 +83,13 @@ class CoarseConfig:
             (:meth:`CoarseAligner.refine`); smaller images are refined at full resolution.
         refine_preset: DIS optical flow preset of the refinement.
         finish_width_px: Largest working width of the refinement that finishes a search's
-            winner (``finish=True``): wider images than ``refine_width_px`` are refined
-            closer to full resolution there only, once or twice per search.
+            winner (``refine(..., finish=True)``, once or twice per search); the other
+            refinements work at ``refine_width_px``.
         shift_peaks: Further shifted alignments: the strongest phase-correlation peaks of
             ``shift_strips`` horizontal strips of the lower half whose displacement points left
             by at least ``min_shift_px`` (a ground plane's disparity); 0: only the dominant
             shift. Measured on rough-rig tuning scenes (seeds 0-89 and 200-239, documented
-            default prior): see docs/TRUST.md.
+            default prior): docs/BENCHMARKS.md, trust round 8.
         shift_strips: Horizontal strips of the lower half correlated for ``shift_peaks``.
     """
 
