@@ -25,7 +25,8 @@ displacement over tens of pixels, and a periodic floor (tiles, planks) correlate
 period off, so the strongest peak is often an alias. The right image is therefore also aligned
 after a few more displacements: the strongest phase-correlation peaks of horizontal strips of
 the lower half (each strip smears less), at half the working width, of a ground plane's sign
-(the right camera sees the floor further left). Measured (see ``shift_peaks``).
+(the right camera sees the floor further left): :meth:`CoarseAligner.peak_candidates`, for a
+search in doubt only (they cost a dense flow each).
 """
 
 from __future__ import annotations
@@ -81,11 +82,14 @@ class CoarseConfig:
         refine_width_px: Largest working width of the photometric refinement
             (:meth:`CoarseAligner.refine`); smaller images are refined at full resolution.
         refine_preset: DIS optical flow preset of the refinement.
+        finish_width_px: Largest working width of the refinement that finishes a search's
+            winner (``refine(..., finish=True)``, once or twice per search); the other
+            refinements work at ``refine_width_px``.
         shift_peaks: Further shifted alignments: the strongest phase-correlation peaks of
             ``shift_strips`` horizontal strips of the lower half whose displacement points left
             by at least ``min_shift_px`` (a ground plane's disparity); 0: only the dominant
             shift. Measured on rough-rig tuning scenes (seeds 0-89 and 200-239, documented
-            default prior): see docs/TRUST.md.
+            default prior): docs/BENCHMARKS.md, trust round 8.
         shift_strips: Horizontal strips of the lower half correlated for ``shift_peaks``.
     """
 
@@ -100,6 +104,7 @@ class CoarseConfig:
     min_shift_px: float = 4.0
     refine_width_px: int = 640
     refine_preset: str = 'medium'
+    finish_width_px: int = 1280
     shift_peaks: int = 4
     shift_strips: int = 3
 
@@ -114,7 +119,7 @@ class CoarseConfig:
             if getattr(self, name) not in _PRESETS:
                 raise ValueError(f'{name} must be one of {sorted(_PRESETS)}, got '
                                  f'{getattr(self, name)!r}')
-        for name in ('width_px', 'refine_width_px'):
+        for name in ('width_px', 'refine_width_px', 'finish_width_px'):
             if not 32 <= getattr(self, name) <= 4096:
                 raise ValueError(f'{name} must be in [32, 4096], got {getattr(self, name)}')
         if self.step_px < 1 or self.threshold_px <= 0 or self.max_forward_backward_px <= 0:
@@ -260,7 +265,7 @@ class CoarseAligner:
         return out
 
     def refine(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-               near_px: float = REFINE_NEAR_PX) -> np.ndarray | None:
+               near_px: float = REFINE_NEAR_PX, finish: bool = False) -> np.ndarray | None:
         """Return a plane moved onto the dense flow that is left after warping by it.
 
         The right image is warped into the left view by ``homography`` and aligned to the left
@@ -282,6 +287,10 @@ class CoarseAligner:
             right: (H, W) uint8 right image (the same size).
             homography: (3, 3) float64 left-to-right plane homography.
             near_px: Largest residual flow of the samples fitted, pixels at the working width.
+            finish: Work at ``finish_width_px`` instead of ``refine_width_px`` (a search's
+                winner: KITTI 000046, 1242 px wide, whole image, came 0.60 / 0.67 px from the
+                road with the default / KITTI prior refined at 640 px, 0.49 / 0.48 px at full
+                resolution).
 
         Returns:
             (3, 3) float64 homography with ``H[2, 2] == 1``, or None if too few samples, no
@@ -292,7 +301,8 @@ class CoarseAligner:
 
         """
         _check_pair(left, right)
-        scale = min(1.0, self.config.refine_width_px / left.shape[1])
+        width = self.config.finish_width_px if finish else self.config.refine_width_px
+        scale = min(1.0, width / left.shape[1])
         small_l, small_r = _reduce(left, scale), _reduce(right, scale)
         if min(small_l.shape) < MIN_SIZE_PX:
             return None

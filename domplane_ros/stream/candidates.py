@@ -177,7 +177,8 @@ class CandidateWork:
         """
         for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
             least = PHOTOMETRIC_MIN_PEAK * verdict.peak_score
-            refined = self.trust.refined(step.left, step.right, estimate.homography)
+            refined = self.trust.refined(step.left, step.right, estimate.homography,
+                                         finish=True)
             if refined is None or check_homography(refined):
                 break
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)

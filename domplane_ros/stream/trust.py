@@ -284,9 +284,12 @@ class TrustGate:
         return self._coarse.candidates(left, right, bool(key))
 
     def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                near_px: float = REFINE_NEAR_PX) -> np.ndarray | None:
-        """Return the plane's photometric refinement (:meth:`CoarseAligner.refine`), unverified."""
-        return self._coarse.refine(left, right, homography, near_px)
+                near_px: float = REFINE_NEAR_PX, finish: bool = False) -> np.ndarray | None:
+        """Return the plane's photometric refinement (:meth:`CoarseAligner.refine`), unverified.
+
+        ``finish``: a search's winner, refined at the finishing width.
+        """
+        return self._coarse.refine(left, right, homography, near_px, finish)
 
     def challenge_due(self) -> bool:
         """Return whether the lock is challenged in this frame."""
