@@ -398,6 +398,8 @@ def _strip_peaks(left: np.ndarray, right: np.ndarray, count: int, min_shift_px: 
     spectrum = np.conj(np.fft.fft2((a - a.mean()) * window)) * np.fft.fft2((b - b.mean()) * window)
     spectrum /= np.abs(spectrum) + 1e-9
     surface = np.fft.fftshift(np.real(np.fft.ifft2(spectrum))).astype(np.float32)
+    if not surface.max() > surface.min():
+        return []  # an untextured strip (a black border): every pixel would be a 'peak'
     centre_y, centre_x = surface.shape[0] // 2, surface.shape[1] // 2
     ys, xs = np.nonzero(surface == cv2.dilate(surface, np.ones((3, 3), np.uint8)))
     dx, dy = 2.0 * (xs - centre_x), 2.0 * (ys - centre_y)

@@ -90,6 +90,21 @@ def test_strip_peaks_find_the_floor_where_the_dominant_shift_is_an_alias(seed):
         CoarseConfig(shift_peaks=-1)
 
 
+def test_an_untextured_lower_half_gives_no_further_shifts():
+    # A black lower half (a rectification border, a masked bonnet) has no correlation peak:
+    # no further shifted alignment is worth its dense flows. Textured, shifted 30 px to the
+    # left but 60 px in the lowest strip, it gives the strip's shift as a further one
+    # (working px: the 320 x 240 images are not reduced).
+    left = np.random.default_rng(5).integers(0, 256, (240, 320), dtype=np.uint8)
+    right = np.roll(left, -30, axis=1)
+    right[180:] = np.roll(left, -60, axis=1)[180:]
+    aligner = CoarseAligner()
+    shifts = aligner._peak_shifts(left, right)
+    assert shifts[0] == (-60.0, 0.0), shifts
+    left[120:], right[120:] = 0, 0
+    assert aligner._peak_shifts(left, right) == []
+
+
 @pytest.mark.parametrize('seed, floor', [(4, 'planks'), (9, 'random'), (3, 'tiles')])
 def test_the_photometric_refinement_moves_a_plane_onto_the_floor(seed, floor):
     frame = random_scene(seed, floor=floor)
