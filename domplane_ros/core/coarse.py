@@ -82,9 +82,10 @@ class CoarseConfig:
         refine_width_px: Largest working width of the photometric refinement
             (:meth:`CoarseAligner.refine`); smaller images are refined at full resolution.
         refine_preset: DIS optical flow preset of the refinement.
-        finish_width_px: Largest working width of the refinement that finishes a search's
-            winner (``refine(..., finish=True)``, once or twice per search); the other
-            refinements work at ``refine_width_px``.
+        finish_width_px: Largest working width of the refinement that finishes a published
+            plane of a search or a challenge (``refine(..., finish=True)``, up to twice) and
+            of a search's near-miss rescue (up to twice for each of two planes); the other
+            refinements (the few-corner paths) work at ``refine_width_px``.
         shift_peaks: Further shifted alignments: the strongest phase-correlation peaks of
             ``shift_strips`` horizontal strips of the lower half whose displacement points left
             by at least ``min_shift_px`` (a ground plane's disparity); 0: only the dominant

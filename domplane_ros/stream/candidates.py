@@ -48,15 +48,16 @@ TIGHT_POLISH_MAX_MOVE_PX = 2.0
 TIGHT_POLISH_MIN_PEAK = 0.97
 
 # Then the photometric refinement (TrustGate.refined: the dense flow left after warping by the
-# plane, at full resolution up to 640 px wide) replaces the plane if it is verified and keeps
-# PHOTOMETRIC_MIN_PEAK of the peak score, up to PHOTOMETRIC_FINISH_ROUNDS times. Corners are
-# found at slightly different floor points in the two views of planks and tiles, which biases
-# their fit by up to 1-2 px; the flow has no such bias. Measured on tuning seeds 30-89 (cold
-# start, rough rigs; documented default prior): published / correct 57 / 55 and 53 / 51
-# before (refined at 320 px, taken only with a 5 % higher peak score), 57 / 57 and 53 / 53
-# after, median error 0.14 -> 0.096 px and 0.15 -> 0.094 px, no wrong plane either way. The
-# peak score (at 160 px) cannot rank planes a few tenths of a pixel apart, so it only guards
-# against a refinement that went elsewhere.
+# plane, at full resolution up to CoarseConfig.finish_width_px, 1280 px wide; the figures below
+# are of 640 x 480 pairs, refined at full resolution either way) replaces the plane if it is
+# verified and keeps PHOTOMETRIC_MIN_PEAK of the peak score, up to PHOTOMETRIC_FINISH_ROUNDS
+# times. Corners are found at slightly different floor points in the two views of planks and
+# tiles, which biases their fit by up to 1-2 px; the flow has no such bias. Measured on tuning
+# seeds 30-89 (cold start, rough rigs; documented default prior): published / correct 57 / 55
+# and 53 / 51 before (refined at 320 px, taken only with a 5 % higher peak score), 57 / 57 and
+# 53 / 53 after, median error 0.14 -> 0.096 px and 0.15 -> 0.094 px, no wrong plane either way.
+# The peak score (at 160 px) cannot rank planes a few tenths of a pixel apart, so it only
+# guards against a refinement that went elsewhere.
 PHOTOMETRIC_MIN_PEAK = 0.97
 PHOTOMETRIC_FINISH_ROUNDS = 2
 # A refinement that moved the corners' predictions by less than this (median, pixels) has
