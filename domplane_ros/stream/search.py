@@ -212,16 +212,20 @@ class PlaneSearch:
                             pool: list[PlaneEstimate], size: tuple[int, int]) -> bool:
         """Add the near misses of the pool, refined photometrically; return whether any.
 
-        Near misses: planes refused only for explaining too little of the image, with at
-        least :data:`NEAR_MISS_RATIO` of ``verification.min_score``; the best
+        Near misses: ground planes of the right sign refused only for explaining too little of
+        the image, with at least :data:`NEAR_MISS_RATIO` of ``verification.min_score``; the best
         :data:`NEAR_MISSES` distinct ones by score (:meth:`CandidateWork.rescued`).
         """
         trust, cfg = self._trust(), self._config()
         least = NEAR_MISS_RATIO * cfg.verification.min_score
         judged = [(trust.judge(step.left, step.right, plane.homography, cfg.features.roi),
                    plane) for plane in pool]
+        # A plane refused for its disparity slope (swapped cameras, no ground plane) is no near
+        # miss whatever its verification says: the refinement moves it a pixel or two, not to
+        # a slope of the other sign, and would take a ground plane's slot.
         misses = sorted(((v, plane) for v, plane in judged
-                         if v.verification.reason == REASON_LOW_SUPPORT
+                         if v.ground and not v.swapped
+                         and v.verification.reason == REASON_LOW_SUPPORT
                          and v.verification.score >= least),
                         key=lambda item: -item[0].verification.score)
         work, added, tried = self._work(), False, []

@@ -7,6 +7,7 @@ Every configuration here is the documented default (no prior built from a scene'
 from __future__ import annotations
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
 from domplane_ros.core import coarse as coarse_module
@@ -20,7 +21,8 @@ from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_erro
 from domplane_ros.stream import candidates as candidates_module
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
-from domplane_ros.stream.candidates import CANDIDATE_TOLERANCE_PX, CandidateWork
+from domplane_ros.stream.candidates import (CANDIDATE_TOLERANCE_PX, CandidateWork,
+                                            photometric_estimate)
 from domplane_ros.stream.pipeline import LOCKED, PlanePipeline
 from domplane_ros.stream.trust import TrustGate
 import numpy as np
@@ -476,3 +478,34 @@ def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch)
     monkeypatch.setattr(search_module, 'NEAR_MISSES', 0)
     without = PlanePipeline(config).process(frame.left, frame.right, 0)
     assert not without.ok and 'explains too little' in without.reason
+
+
+@pytest.mark.parametrize('swap', [False, True])
+def test_only_a_ground_plane_of_the_right_sign_is_a_near_miss(scene, monkeypatch, swap):
+    # The true plane, held under a verification.min_score just above its score, is a near
+    # miss (refused only for explaining too little); the same scene with swapped cameras
+    # gives a plane of about the same score that is refused as swapped too, and a
+    # photometric refinement cannot change that: it is not refined.
+    frame = swapped(scene) if swap else scene
+    score = TrustGate(PlaneNodeConfig().verification).judge(
+        frame.left, frame.right, frame.homography).verification.score
+    config = PlaneNodeConfig()
+    config = replace(config, verification=replace(config.verification, min_score=score + 0.05))
+    gate = TrustGate(config.verification)
+    search = search_module.PlaneSearch(lambda: config, lambda: gate, None, None, None)
+    refined = []
+
+    def rescued(self, step, problem, estimate, verdict):
+        refined.append(verdict)
+        return estimate, verdict
+
+    monkeypatch.setattr(CandidateWork, 'rescued', rescued)
+    step = SimpleNamespace(left=frame.left, right=frame.right)
+    pool = [photometric_estimate(frame.homography)]
+    size = (frame.left.shape[1], frame.left.shape[0])
+    assert not search._rescue_near_misses(step, None, pool, size)
+    if swap:
+        assert refined == []
+    else:
+        assert len(refined) == 1
+        assert refined[0].verification.reason == verification.REASON_LOW_SUPPORT
