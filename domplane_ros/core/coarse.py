@@ -222,7 +222,11 @@ class CoarseAligner:
 
     def _aligned_after(self, small_l: np.ndarray, small_r: np.ndarray,
                        shift: tuple[float, float], scale: float) -> list[np.ndarray]:
-        """Return the full-resolution planes of the alignment after ``shift`` (working px)."""
+        """Return the full-resolution planes of the alignment after ``shift`` (working px).
+
+        ``small_l`` and ``small_r`` are the (h, w) uint8 images at the working width, ``scale``
+        their size over the full images'; the planes are (3, 3) float64, not normalised.
+        """
         src, dst = self._samples(small_l, _translated(small_r, -shift[0], -shift[1]))
         dst += np.asarray(shift, np.float32)
         to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
@@ -232,7 +236,8 @@ class CoarseAligner:
     def _peak_shifts(self, left: np.ndarray, right: np.ndarray) -> list[tuple[float, float]]:
         """Return up to ``shift_peaks`` strip peaks (dx, dy), working px, strongest first.
 
-        Each lies more than ``min_shift_px`` from the dominant shift and from those before it.
+        ``left`` and ``right`` are the (h, w) uint8 images at the working width. Each peak lies
+        more than ``min_shift_px`` from the dominant shift and from those before it.
         """
         cfg = self.config
         shifts = [_dominant_shift(left, right)]
@@ -387,9 +392,11 @@ def _strip_peaks(left: np.ndarray, right: np.ndarray, count: int, min_shift_px: 
                  ) -> list[tuple[float, float, float]]:
     """Return up to ``count`` phase-correlation peaks (dx, dy, height) of one image strip.
 
-    The strips are correlated at half their size (the floor's texture is smoothed, the peaks
-    sharpen); only displacements pointing left by at least ``min_shift_px`` are kept (pixels
-    of the strip's full size), strongest first.
+    ``left`` and ``right`` are the strip's (h, w) uint8 rows of the two images (no peak if
+    either side is under 8 px, or the strip has no texture). The strips are correlated at
+    half their size (the floor's texture is smoothed, the peaks sharpen); only displacements
+    pointing left by at least ``min_shift_px`` are kept (pixels of the strip's full size),
+    strongest first.
     """
     if min(left.shape) < 8:
         return []
