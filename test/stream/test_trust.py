@@ -480,17 +480,20 @@ def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch)
     assert not without.ok and 'explains too little' in without.reason
 
 
-@pytest.mark.parametrize('swap', [False, True])
-def test_only_a_ground_plane_of_the_right_sign_is_a_near_miss(scene, monkeypatch, swap):
+@pytest.mark.parametrize('case', ['truth', 'swapped', 'too far under'])
+def test_only_a_ground_plane_of_the_right_sign_is_a_near_miss(scene, monkeypatch, case):
     # The true plane, held under a verification.min_score just above its score, is a near
     # miss (refused only for explaining too little); the same scene with swapped cameras
     # gives a plane of about the same score that is refused as swapped too, and a
-    # photometric refinement cannot change that: it is not refined.
-    frame = swapped(scene) if swap else scene
+    # photometric refinement cannot change that: it is not refined. Nor is the truth under
+    # NEAR_MISS_RATIO x min_score.
+    frame = swapped(scene) if case == 'swapped' else scene
     score = TrustGate(PlaneNodeConfig().verification).judge(
         frame.left, frame.right, frame.homography).verification.score
+    least = score / search_module.NEAR_MISS_RATIO + 0.02 if case == 'too far under' \
+        else score + 0.05
     config = PlaneNodeConfig()
-    config = replace(config, verification=replace(config.verification, min_score=score + 0.05))
+    config = replace(config, verification=replace(config.verification, min_score=least))
     gate = TrustGate(config.verification)
     search = search_module.PlaneSearch(lambda: config, lambda: gate, None, None, None)
     refined = []
@@ -504,8 +507,21 @@ def test_only_a_ground_plane_of_the_right_sign_is_a_near_miss(scene, monkeypatch
     pool = [photometric_estimate(frame.homography)]
     size = (frame.left.shape[1], frame.left.shape[0])
     assert not search._rescue_near_misses(step, None, pool, size)
-    if swap:
-        assert refined == []
-    else:
+    if case == 'truth':
         assert len(refined) == 1
         assert refined[0].verification.reason == verification.REASON_LOW_SUPPORT
+    else:
+        assert refined == []
+
+
+def test_a_search_is_in_doubt_once_without_a_verified_plane_or_under_the_uniqueness():
+    search = search_module.PlaneSearch(PlaneNodeConfig, None, None, None, None)
+    state = search_module._Search(tried={0, 1})
+    doubt = search_module.DOUBT_UNIQUENESS
+    verdict = SimpleNamespace(uniqueness=doubt - 0.01)
+    assert search._in_doubt(state, verdict, 2)
+    assert not search._in_doubt(state, SimpleNamespace(uniqueness=doubt), 2)
+    assert search._in_doubt(state, None, 2)  # the search's last pair
+    assert not search._in_doubt(state, None, 3)  # more pairs to come
+    state.peaks_tried = True
+    assert not search._in_doubt(state, verdict, 2)
