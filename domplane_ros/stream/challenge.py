@@ -9,10 +9,11 @@ pair, each bounded by one refinement or one screening (measured 10-45 ms):
 
 1. ``coarse``: the coarse alignment of this pair, in three ``coarse step`` tasks (the
    forward DIS flow, the backward flow, the fits: about 9, 9 and 4 ms CPU at 640x480, the
-   whole 22-27 ms); its planes, moved through the cameras' motion since the pair they were
-   aligned on, become ``coarse start`` tasks, except starts within :data:`NEAR_LOCK_PX` of
-   the lock or of a start already queued (they converge to the lock or to the same plane:
-   measured, starts 1.8 to 11.8 px from the lock ended within 0.22 px of it);
+   whole 22-27 ms; the pipeline runs the ``screen`` task in the pair of the fits); its
+   planes, moved through the cameras' motion since the pair they were aligned on, become
+   ``coarse start`` tasks, except starts within :data:`NEAR_LOCK_PX` of the lock or of a
+   start already queued (they converge to the lock or to the same plane: measured, starts
+   1.8 to 11.8 px from the lock ended within 0.22 px of it);
 2. one ``coarse start`` per pair: refined from the start moved through the cameras' motion
    since (``H' = M_right H M_left^-1``, as the lock's prediction), verified, and taken if it
    beats the lock; without a motion the coarse starts are dropped;
@@ -102,13 +103,16 @@ class Challenge:
             kept.append(task)
         self._tasks = kept
 
-    def align(self, task: Task, lock: np.ndarray, size: tuple[int, int]) -> None:
+    def align(self, task: Task, lock: np.ndarray, size: tuple[int, int]) -> bool:
         """Run one step of the coarse alignment; queue it again, or its planes as starts.
 
         Args:
             task: A ``coarse step`` task (its steps generator and motion since).
             lock: (3, 3) float64 the lock's homography in this pair.
             size: ``(width, height)`` of the images, pixels.
+
+        Returns:
+            Whether the alignment is done (its planes queued).
 
         """
         assert task.kind == COARSE_STEP and task.steps is not None
@@ -117,8 +121,17 @@ class Challenge:
         except StopIteration as done:
             moved = (predict_plane_homography(plane, *task.motions) for plane in done.value)
             self.add_coarse_starts([m for m in moved if m is not None], lock, size)
-        else:
-            self._tasks.appendleft(task)
+            return True
+        self._tasks.appendleft(task)
+        return False
+
+    def take(self, kind: str) -> bool:
+        """Remove the first queued task of ``kind`` (to run now); return whether it was there."""
+        for task in self._tasks:
+            if task.kind == kind:
+                self._tasks.remove(task)
+                return True
+        return False
 
     def add_coarse_starts(self, starts: Iterable[np.ndarray], lock: np.ndarray,
                           size: tuple[int, int]) -> int:

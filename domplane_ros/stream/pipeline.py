@@ -22,8 +22,8 @@ from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC
-from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_STEP, PRIOR_START,
-                                           PRIOR_STARTS, SCREEN, Task)
+from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, COARSE_STEP,
+                                           PRIOR_START, PRIOR_STARTS, SCREEN, Task)
 from domplane_ros.stream.detection import (carried_features, detect_features, full_mask,
                                            level_features)
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
@@ -419,15 +419,16 @@ class PlanePipeline:
             return False
         if task.kind in (COARSE, COARSE_STEP):
             if task.kind == COARSE:
-                steps = self._trust.coarse_steps(step.left, step.right)
-                task = Task(COARSE_STEP, steps=steps)
-            if task.steps is not None:
-                self._challenge.align(task, step.estimate.homography, size)
-        elif task.kind == SCREEN:
+                task = Task(COARSE_STEP, steps=self._trust.coarse_steps(step.left, step.right))
+            # The alignment's last step (the fits) is the cheapest: the screening joins it.
+            if (task.steps is None or self._challenge.align(
+                    task, step.estimate.homography, size)) and self._challenge.take(SCREEN):
+                task = Task(SCREEN)
+        if task.kind == SCREEN:
             candidates = self._searcher.candidates(size)
             self._challenge.add_prior_starts(candidates[i] for i in problem.best_screened(
                 candidates, self.config.prior.screen_threshold_px, PRIOR_STARTS))
-        else:
+        elif task.kind in (COARSE_START, PRIOR_START):
             options = (self._work().options if task.kind == PRIOR_START
                        else self.config.estimator)
             result = problem.estimate(task.start, options, widen=False)
