@@ -168,13 +168,14 @@ class CoarseAligner:
 
     def plain_steps(self, left: np.ndarray, right: np.ndarray
                     ) -> Generator[None, None, np.ndarray]:
-        """Return :meth:`candidates` without the shifted alignment, as three resumable steps.
+        """Return :meth:`candidates` without the shifted alignment, as two resumable steps.
 
-        The forward flow, the backward flow, then the samples and the fits: each ``next()``
-        runs one step (about a third of the whole), the last raises ``StopIteration`` whose
-        ``value`` is ``candidates(left, right, shifted=False)``, the same planes bit for bit
-        (the flows start from nothing, so other calls in between change nothing). The
-        images are copied at the first step: the caller may reuse its buffers.
+        The forward flow, then the backward flow, the samples and the fits: the first
+        ``next()`` runs the first step (about 40 % of the whole), the second the rest and
+        raises ``StopIteration`` whose ``value`` is ``candidates(left, right,
+        shifted=False)``, the same planes bit for bit (the flows start from nothing, so other
+        calls in between change nothing). The images are copied: the caller may reuse its
+        buffers.
 
         Args:
             left: (H, W) uint8 left image.
@@ -200,7 +201,6 @@ class CoarseAligner:
         forward = self._flow.calc(small_l, small_r, None)
         yield
         backward = self._flow.calc(small_r, small_l, None)
-        yield
         to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
         from_full = np.diag([scale, scale, 1.0])
         out = [to_full @ h @ from_full for h in self._fitted(

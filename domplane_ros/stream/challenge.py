@@ -7,13 +7,14 @@ candidates, each refined on the features and verified. Done in one pair that cos
 at 640 x 480 (eight to ten warm pairs), so the challenge is a queue of tasks, one per locked
 pair, each bounded by one refinement or one screening (measured 10-45 ms):
 
-1. ``coarse``: the coarse alignment of this pair, in three ``coarse step`` tasks (the
-   forward DIS flow, the backward flow, the fits: about 9, 9 and 4 ms CPU at 640x480, the
-   whole 22-27 ms; the pipeline runs the ``screen`` task in the pair of the fits); its
-   planes, moved through the cameras' motion since the pair they were aligned on, become
-   ``coarse start`` tasks, except starts within :data:`NEAR_LOCK_PX` of the lock or of a
-   start already queued (they converge to the lock or to the same plane: measured, starts
-   1.8 to 11.8 px from the lock ended within 0.22 px of it);
+1. ``coarse``: the coarse alignment of this pair in two steps, its forward DIS flow here
+   (the pipeline runs the ``screen`` task in the same pair), then a ``coarse step`` task,
+   the backward flow and the fits (at 640x480 about 9 + 5 and 9 + 4 ms CPU, where the
+   alignment alone was 22-27 ms and the screening 14-15); its planes, moved through the
+   cameras' motion since the pair they were aligned on, become ``coarse start`` tasks,
+   except starts within :data:`NEAR_LOCK_PX` of the lock or of a start already queued (they
+   converge to the lock or to the same plane: measured, starts 1.8 to 11.8 px from the lock
+   ended within 0.22 px of it);
 2. one ``coarse start`` per pair: refined from the start moved through the cameras' motion
    since (``H' = M_right H M_left^-1``, as the lock's prediction), verified, and taken if it
    beats the lock; without a motion the coarse starts are dropped;

@@ -417,13 +417,16 @@ class PlanePipeline:
         if task is None:
             self._challenge = None
             return False
-        if task.kind in (COARSE, COARSE_STEP):
-            if task.kind == COARSE:
-                task = Task(COARSE_STEP, steps=self._trust.coarse_steps(step.left, step.right))
-            # The alignment's last step (the fits) is the cheapest: the screening joins it.
-            if (task.steps is None or self._challenge.align(
-                    task, step.estimate.homography, size)) and self._challenge.take(SCREEN):
+        if task.kind == COARSE:
+            # The alignment's first step (its forward flow) and the screening share a pair.
+            steps = self._trust.coarse_steps(step.left, step.right)
+            if steps is not None:
+                self._challenge.align(Task(COARSE_STEP, steps=steps),
+                                      step.estimate.homography, size)
+            if self._challenge.take(SCREEN):
                 task = Task(SCREEN)
+        elif task.kind == COARSE_STEP:
+            self._challenge.align(task, step.estimate.homography, size)
         if task.kind == SCREEN:
             candidates = self._searcher.candidates(size)
             self._challenge.add_prior_starts(candidates[i] for i in problem.best_screened(

@@ -278,8 +278,8 @@ class TrustGate:
         """Return the plain coarse alignment as resumable steps (the lock's challenge).
 
         :meth:`CoarseAligner.plain_steps`: ``coarse_candidates(left, right, shifted=False)``
-        spread over three ``next()`` calls; None if the coarse candidates are disabled or
-        the images differ in size.
+        spread over two ``next()`` calls; None if the coarse candidates are disabled or the
+        images differ in size.
         """
         if not self.settings.coarse_candidates or left.shape != right.shape:
             return None

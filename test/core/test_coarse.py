@@ -138,5 +138,5 @@ def test_the_plain_alignment_in_steps_gives_the_same_planes_bit_for_bit():
             ran += 1
             # Other alignments in between (the search's, another pair's) change nothing.
             aligner.candidates(other.left, other.right)
-    assert ran == 2 and whole.shape[0] >= 1
+    assert ran == 1 and whole.shape[0] >= 1
     np.testing.assert_array_equal(done.value.value, whole)

@@ -106,7 +106,7 @@ def test_the_alignment_runs_in_steps_and_its_planes_follow_the_cameras():
     assert first.kind == COARSE_START
     assert corner_distance_px(first.start, _shift(72.0, 4.0), *SIZE) < 1e-9
     assert corner_distance_px(challenge.next_task().start, _shift(22.0, 4.0), *SIZE) < 1e-9
-    # The pipeline runs the screening in the pair of the fits: taken out of the queue.
+    # The pipeline runs the screening in the alignment's first pair: taken out of the queue.
     assert challenge.take(SCREEN) and not challenge.take(SCREEN) and challenge.done
     # Without a motion the alignment's planes would be stale: the task is dropped.
     challenge = Challenge()
