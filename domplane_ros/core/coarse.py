@@ -19,6 +19,14 @@ and aligned again; each alignment gives its own candidates. Measured on 30 rough
 scenes: the nearest candidate was more than 25 px from the truth on 5 (all with the floor's
 disparity over 90 px at 640 px), within 2.5 px on all 5 with the shifted alignment, which
 alone failed on one other scene (its shift had the wrong sign).
+
+The lower half's dominant displacement is itself a guess: perspective smears the floor's
+displacement over tens of pixels, and a periodic floor (tiles, planks) correlates as well one
+period off, so the strongest peak is often an alias. The right image is therefore also aligned
+after a few more displacements: the strongest phase-correlation peaks of horizontal strips of
+the lower half (each strip smears less), at half the working width, of a ground plane's sign
+(the right camera sees the floor further left): :meth:`CoarseAligner.peak_candidates`, for a
+search in doubt only (they cost a dense flow each).
 """
 
 from __future__ import annotations
@@ -74,6 +82,15 @@ class CoarseConfig:
         refine_width_px: Largest working width of the photometric refinement
             (:meth:`CoarseAligner.refine`); smaller images are refined at full resolution.
         refine_preset: DIS optical flow preset of the refinement.
+        finish_width_px: Largest working width of the refinement that finishes a search's
+            winner (``refine(..., finish=True)``, once or twice per search); the other
+            refinements work at ``refine_width_px``.
+        shift_peaks: Further shifted alignments: the strongest phase-correlation peaks of
+            ``shift_strips`` horizontal strips of the lower half whose displacement points left
+            by at least ``min_shift_px`` (a ground plane's disparity); 0: only the dominant
+            shift. Measured on rough-rig tuning scenes (seeds 0-89 and 200-239, documented
+            default prior): docs/BENCHMARKS.md, trust round 8.
+        shift_strips: Horizontal strips of the lower half correlated for ``shift_peaks``.
     """
 
     width_px: int = 320
@@ -87,6 +104,9 @@ class CoarseConfig:
     min_shift_px: float = 4.0
     refine_width_px: int = 640
     refine_preset: str = 'medium'
+    finish_width_px: int = 1280
+    shift_peaks: int = 4
+    shift_strips: int = 3
 
     def __post_init__(self) -> None:
         """Check the values.
@@ -99,7 +119,7 @@ class CoarseConfig:
             if getattr(self, name) not in _PRESETS:
                 raise ValueError(f'{name} must be one of {sorted(_PRESETS)}, got '
                                  f'{getattr(self, name)!r}')
-        for name in ('width_px', 'refine_width_px'):
+        for name in ('width_px', 'refine_width_px', 'finish_width_px'):
             if not 32 <= getattr(self, name) <= 4096:
                 raise ValueError(f'{name} must be in [32, 4096], got {getattr(self, name)}')
         if self.step_px < 1 or self.threshold_px <= 0 or self.max_forward_backward_px <= 0:
@@ -108,6 +128,9 @@ class CoarseConfig:
             raise ValueError(f'min_shift_px must be positive, got {self.min_shift_px!r}')
         if not all(0.0 <= part < 1.0 for part in self.lower_parts):
             raise ValueError(f'lower_parts must lie in [0, 1), got {self.lower_parts!r}')
+        if self.shift_peaks < 0 or self.shift_strips < 1:
+            raise ValueError(f'shift_peaks must be >= 0 and shift_strips >= 1, got '
+                             f'{self.shift_peaks!r} and {self.shift_strips!r}')
         if int(self.planes_per_part) != self.planes_per_part or self.planes_per_part < 1:
             raise ValueError(f'planes_per_part must be an integer >= 1, got '
                              f'{self.planes_per_part!r}')
@@ -161,10 +184,69 @@ class CoarseAligner:
                for h in self._fitted(*self._samples(small_l, small_r), rows)]
         shift = _dominant_shift(small_l, small_r) if shifted else (0.0, 0.0)
         if shifted and math.hypot(*shift) >= cfg.min_shift_px:
-            src, dst = self._samples(small_l, _translated(small_r, -shift[0], -shift[1]))
-            dst += np.asarray(shift, np.float32)
-            out += [to_full @ h @ from_full for h in self._fitted(src, dst, rows)]
+            out += self._aligned_after(small_l, small_r, shift, scale)
         return np.stack([h / h[2, 2] for h in out]) if out else np.zeros((0, 3, 3))
+
+    def peak_candidates(self, left: np.ndarray, right: np.ndarray) -> np.ndarray:
+        """Return the planes of the further shifted alignments (the strips' peaks).
+
+        The right image is aligned again after each of up to ``shift_peaks`` displacements:
+        the strongest phase-correlation peaks of ``shift_strips`` horizontal strips of the
+        lower half (:func:`_strip_peaks`) that point left by at least ``min_shift_px`` and lie
+        more than ``min_shift_px`` from the dominant shift and from each other. These cost a
+        dense flow each and give many planes, so they are for a search in doubt (see
+        :class:`~domplane_ros.stream.search.PlaneSearch`), not for every pair.
+
+        Args:
+            left: (H, W) uint8 left image.
+            right: (H, W) uint8 right image (the same size).
+
+        Returns:
+            (K, 3, 3) float64 homographies at full resolution, ``H[2, 2] == 1`` (K may be 0).
+
+        Raises:
+            ValueError: If the images are not 2-D uint8 arrays of the same size.
+
+        """
+        _check_pair(left, right)
+        cfg = self.config
+        scale = min(1.0, cfg.width_px / left.shape[1])
+        small_l, small_r = _reduce(left, scale), _reduce(right, scale)
+        if min(small_l.shape) < MIN_SIZE_PX or cfg.shift_peaks == 0:
+            return np.zeros((0, 3, 3))
+        out = []
+        for shift in self._peak_shifts(small_l, small_r):
+            out += self._aligned_after(small_l, small_r, shift, scale)
+        return np.stack([h / h[2, 2] for h in out]) if out else np.zeros((0, 3, 3))
+
+    def _aligned_after(self, small_l: np.ndarray, small_r: np.ndarray,
+                       shift: tuple[float, float], scale: float) -> list[np.ndarray]:
+        """Return the full-resolution planes of the alignment after ``shift`` (working px)."""
+        src, dst = self._samples(small_l, _translated(small_r, -shift[0], -shift[1]))
+        dst += np.asarray(shift, np.float32)
+        to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
+        from_full = np.diag([scale, scale, 1.0])
+        return [to_full @ h @ from_full for h in self._fitted(src, dst, small_l.shape[0])]
+
+    def _peak_shifts(self, left: np.ndarray, right: np.ndarray) -> list[tuple[float, float]]:
+        """Return up to ``shift_peaks`` strip peaks (dx, dy), working px, strongest first.
+
+        Each lies more than ``min_shift_px`` from the dominant shift and from those before it.
+        """
+        cfg = self.config
+        shifts = [_dominant_shift(left, right)]
+        rows = left.shape[0]
+        edges = np.linspace(rows // 2, rows, cfg.shift_strips + 1).astype(int)
+        peaks = []
+        for top, bottom in zip(edges[:-1], edges[1:]):
+            peaks += _strip_peaks(left[top:bottom], right[top:bottom], cfg.shift_peaks,
+                                  cfg.min_shift_px)
+        for dx, dy, _ in sorted(peaks, key=lambda peak: -peak[2]):
+            if len(shifts) > cfg.shift_peaks:
+                break
+            if all(math.hypot(dx - x, dy - y) > cfg.min_shift_px for x, y in shifts):
+                shifts.append((dx, dy))
+        return shifts[1:]
 
     def plain_steps(self, left: np.ndarray, right: np.ndarray
                     ) -> Generator[None, None, np.ndarray]:
@@ -224,7 +306,7 @@ class CoarseAligner:
         return out
 
     def refine(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-               near_px: float = REFINE_NEAR_PX) -> np.ndarray | None:
+               near_px: float = REFINE_NEAR_PX, finish: bool = False) -> np.ndarray | None:
         """Return a plane moved onto the dense flow that is left after warping by it.
 
         The right image is warped into the left view by ``homography`` and aligned to the left
@@ -246,6 +328,10 @@ class CoarseAligner:
             right: (H, W) uint8 right image (the same size).
             homography: (3, 3) float64 left-to-right plane homography.
             near_px: Largest residual flow of the samples fitted, pixels at the working width.
+            finish: Work at ``finish_width_px`` instead of ``refine_width_px`` (a search's
+                winner: KITTI 000046, 1242 px wide, whole image, came 0.60 / 0.67 px from the
+                road with the default / KITTI prior refined at 640 px, 0.49 / 0.48 px at full
+                resolution).
 
         Returns:
             (3, 3) float64 homography with ``H[2, 2] == 1``, or None if too few samples, no
@@ -256,7 +342,8 @@ class CoarseAligner:
 
         """
         _check_pair(left, right)
-        scale = min(1.0, self.config.refine_width_px / left.shape[1])
+        width = self.config.finish_width_px if finish else self.config.refine_width_px
+        scale = min(1.0, width / left.shape[1])
         small_l, small_r = _reduce(left, scale), _reduce(right, scale)
         if min(small_l.shape) < MIN_SIZE_PX:
             return None
@@ -339,6 +426,31 @@ def _dominant_shift(left: np.ndarray, right: np.ndarray) -> tuple[float, float]:
     if not (math.isfinite(dx) and math.isfinite(dy)):
         return 0.0, 0.0
     return float(dx), float(dy)
+
+
+def _strip_peaks(left: np.ndarray, right: np.ndarray, count: int, min_shift_px: float
+                 ) -> list[tuple[float, float, float]]:
+    """Return up to ``count`` phase-correlation peaks (dx, dy, height) of one image strip.
+
+    The strips are correlated at half their size (the floor's texture is smoothed, the peaks
+    sharpen); only displacements pointing left by at least ``min_shift_px`` are kept (pixels
+    of the strip's full size), strongest first.
+    """
+    if min(left.shape) < 8:
+        return []
+    a = cv2.resize(left, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA).astype(np.float32)
+    b = cv2.resize(right, None, fx=0.5, fy=0.5, interpolation=cv2.INTER_AREA).astype(np.float32)
+    window = cv2.createHanningWindow((a.shape[1], a.shape[0]), cv2.CV_32F)
+    spectrum = np.conj(np.fft.fft2((a - a.mean()) * window)) * np.fft.fft2((b - b.mean()) * window)
+    spectrum /= np.abs(spectrum) + 1e-9
+    surface = np.fft.fftshift(np.real(np.fft.ifft2(spectrum))).astype(np.float32)
+    centre_y, centre_x = surface.shape[0] // 2, surface.shape[1] // 2
+    ys, xs = np.nonzero(surface == cv2.dilate(surface, np.ones((3, 3), np.uint8)))
+    dx, dy = 2.0 * (xs - centre_x), 2.0 * (ys - centre_y)
+    keep = dx <= -min_shift_px
+    order = np.argsort(-surface[ys[keep], xs[keep]])[:count]
+    return [(float(dx[keep][i]), float(dy[keep][i]), float(surface[ys[keep][i], xs[keep][i]]))
+            for i in order]
 
 
 def _translated(image: np.ndarray, dx: float, dy: float) -> np.ndarray:

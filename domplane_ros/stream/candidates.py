@@ -15,11 +15,11 @@ from typing import Iterable
 from domplane_ros.config import EstimatorConfig, PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import Features
-from domplane_ros.core.homography import check_homography, normalise_scale
+from domplane_ros.core.homography import check_homography, corner_distance_px, normalise_scale
 from domplane_ros.core.prior import PriorSearch
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.stream.acceptance import AcceptanceChecks
-from domplane_ros.stream.challenge import distinct_starts
+from domplane_ros.stream.challenge import distinct_starts, NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.trust import TrustGate, Verdict
 import numpy as np
@@ -177,7 +177,8 @@ class CandidateWork:
         """
         for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
             least = PHOTOMETRIC_MIN_PEAK * verdict.peak_score
-            refined = self.trust.refined(step.left, step.right, estimate.homography)
+            refined = self.trust.refined(step.left, step.right, estimate.homography,
+                                         finish=True)
             if refined is None or check_homography(refined):
                 break
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
@@ -222,15 +223,21 @@ class CandidateWork:
                        line_matches=idx[n:], line_residuals_px=r[n:])
 
     def coarse(self, step: PairStep, problem: TwoStep, feats: Features,
-               size: tuple[int, int]) -> list[PlaneEstimate]:
+               size: tuple[int, int], peaks: bool = False,
+               known: Iterable[np.ndarray] = ()) -> list[PlaneEstimate]:
         """Return the refined, unrejected planes of the coarse photometric alignment.
 
         A start within :data:`~domplane_ros.stream.challenge.NEAR_LOCK_PX` of one refined
-        already is not refined again (the parts of the image often give the same plane).
+        already, or of a ``known`` plane, is not refined (the parts of the image often give
+        the same plane). ``peaks``: the further shifted alignments' planes instead
+        (:meth:`~domplane_ros.stream.trust.TrustGate.coarse_candidates`).
         """
         out = []
-        for start in distinct_starts(self.trust.coarse_candidates(step.left, step.right),
-                                     size):
+        known = list(known)
+        starts = self.trust.coarse_candidates(step.left, step.right, peaks=peaks)
+        for start in distinct_starts(starts, size):
+            if any(corner_distance_px(start, other, *size) < NEAR_LOCK_PX for other in known):
+                continue
             result = problem.estimate(start, self.config.estimator, widen=False)
             if result.ok and not self.checks.rejection_reason(result, feats, size, bounds=False):
                 out.append(result)

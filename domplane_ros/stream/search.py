@@ -38,6 +38,15 @@ import numpy as np
 # confidence (which saturates at a uniqueness of 1.4) are the ones the full rivals give.
 RIVAL_RECHECK_UNIQUENESS = 2.25
 
+# A search whose winner is less than this many times as good as the next distinct plane, or
+# that found no verified plane, also refines the coarse alignment's further shifted
+# alignments (CoarseAligner.peak_candidates: the strongest phase-correlation peaks of strips of
+# the lower half) and picks again. On a periodic floor with a wide disparity the dominant
+# shift is often a period alias, and the truth is then never a candidate: held-out rough rig
+# 6022 published a plane one tile (151 px) off at uniqueness 1.29. 1.4 is where the confidence
+# reaches 1. Measured: docs/BENCHMARKS.md, trust round 8.
+DOUBT_UNIQUENESS = 1.4
+
 __all__ = ['PlaneSearch', 'propagate']
 
 Motions = tuple[np.ndarray, np.ndarray] | None
@@ -71,6 +80,7 @@ class _Search:
     initial_tried: bool = False
     rivals: list[np.ndarray] | None = None  # planes of swapped cameras (stream/swap.py)
     rivals_full: bool = False  # rivals refined to the configured tolerance (rechecked)
+    peaks_tried: bool = False  # the coarse alignment's further shifts refined (in doubt)
 
 
 class PlaneSearch:
@@ -143,8 +153,17 @@ class PlaneSearch:
         step.warm_start = 'search'
         rivals = lambda: self._rivals(search, step, problem, feats, size)  # noqa: E731
         roi = self._config().features.roi
-        best, verdict, unverified = self._checked_pick(
-            search, lambda: self._trust().pick(step.left, step.right, pool, roi, rivals))
+        pick = lambda: self._trust().pick(step.left, step.right, pool, roi, rivals)  # noqa: E731
+        best, verdict, unverified = self._checked_pick(search, pick)
+        if self._in_doubt(search, verdict, limit):
+            # A search in doubt (no verified plane, or a winner not far ahead of another
+            # plane): the coarse alignment after its further shifts, judged with the rest.
+            search.peaks_tried = True
+            more = self._work().coarse(step, problem, feats, size, peaks=True,
+                                       known=[plane.homography for plane in pool])
+            if more:
+                pool += more
+                best, verdict, unverified = self._checked_pick(search, pick)
         if not pool and not rejection and len(search.tried) >= limit:
             # The corners gave no plane at all, not even a refused one (every start had too
             # few inliers: a floor of few corners): the coarse planes refined
@@ -165,6 +184,18 @@ class PlaneSearch:
             return None
         self._end(step, pool, rejection, unverified)
         return None
+
+    def _in_doubt(self, search: _Search, verdict: Verdict | None, limit: int) -> bool:
+        """Return whether the search should try the coarse alignment's further shifts.
+
+        Once per search: where its last pair found no verified plane, or a plane whose
+        uniqueness is below :data:`DOUBT_UNIQUENESS`.
+        """
+        if search.peaks_tried:
+            return False
+        if verdict is None:
+            return len(search.tried) >= limit
+        return verdict.uniqueness < DOUBT_UNIQUENESS
 
     def _done(self, best: PlaneEstimate | None, verdict: Verdict | None
               ) -> tuple[PlaneEstimate, Verdict] | None:

@@ -143,7 +143,7 @@ class TrustGate:
         self._locked_frames = 0
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
-        self._coarse_planes: dict[bool, np.ndarray] = {}
+        self._coarse_planes: dict[bool | str, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
@@ -257,21 +257,31 @@ class TrustGate:
             self._scores.append(verdict.score)
             self._locked_frames += 1
 
-    def coarse_candidates(self, left: np.ndarray, right: np.ndarray, shifted: bool = True
-                          ) -> np.ndarray:
+    def coarse_candidates(self, left: np.ndarray, right: np.ndarray, shifted: bool = True,
+                          peaks: bool = False) -> np.ndarray:
         """Return (K, 3, 3) planes of the coarse photometric alignment (K = 0 if disabled).
 
         ``shifted``: also align after the dominant shift (the search); the lock's challenge
         takes the plain alignment only (measured: the shifted planes cost a warm pair of a
-        cut sequence 4 ms CPU at the median, mostly as extra challengers).
+        cut sequence 4 ms CPU at the median, mostly as extra challengers). ``peaks``: instead,
+        the planes of the further shifted alignments
+        (:meth:`~domplane_ros.core.coarse.CoarseAligner.peak_candidates`), for a search in
+        doubt.
         """
         if not self.settings.coarse_candidates or left.shape != right.shape:
             return np.zeros((0, 3, 3))
+        key = 'peaks' if peaks else shifted
         if self._pair is None or self._pair[0] is not left or self._pair[1] is not right:
-            return self._coarse.candidates(left, right, shifted)
-        if shifted not in self._coarse_planes:  # once per pair of begin_pair
-            self._coarse_planes[shifted] = self._coarse.candidates(left, right, shifted)
-        return self._coarse_planes[shifted].copy()
+            return self._coarse_planes_of(left, right, key)
+        if key not in self._coarse_planes:  # once per pair of begin_pair
+            self._coarse_planes[key] = self._coarse_planes_of(left, right, key)
+        return self._coarse_planes[key].copy()
+
+    def _coarse_planes_of(self, left: np.ndarray, right: np.ndarray, key: bool | str
+                          ) -> np.ndarray:
+        if key == 'peaks':
+            return self._coarse.peak_candidates(left, right)
+        return self._coarse.candidates(left, right, bool(key))
 
     def coarse_steps(self, left: np.ndarray, right: np.ndarray
                      ) -> Generator[None, None, np.ndarray] | None:
@@ -286,9 +296,12 @@ class TrustGate:
         return self._coarse.plain_steps(left, right)
 
     def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                near_px: float = REFINE_NEAR_PX) -> np.ndarray | None:
-        """Return the plane's photometric refinement (:meth:`CoarseAligner.refine`), unverified."""
-        return self._coarse.refine(left, right, homography, near_px)
+                near_px: float = REFINE_NEAR_PX, finish: bool = False) -> np.ndarray | None:
+        """Return the plane's photometric refinement (:meth:`CoarseAligner.refine`), unverified.
+
+        ``finish``: a search's winner, refined at the finishing width.
+        """
+        return self._coarse.refine(left, right, homography, near_px, finish)
 
     def challenge_due(self) -> bool:
         """Return whether the lock is challenged in this frame."""

@@ -73,6 +73,23 @@ def test_a_shifted_alignment_follows_a_disparity_the_flow_cannot(seed):
     assert min(plane_error_px(frame, h) for h in shifted) < 3.0
 
 
+@pytest.mark.parametrize('seed', [39, 223])
+def test_strip_peaks_find_the_floor_where_the_dominant_shift_is_an_alias(seed):
+    # Planks (39) and a wide disparity (223): the lower half's strongest correlation peak is
+    # a period alias or the far field, every candidate of it 150-180 px off; one of the
+    # strips' further peaks is the floor's displacement.
+    frame = rough_rig(random_scene(seed), random_rig_error(np.random.default_rng((seed, 77))))
+    aligner = CoarseAligner()
+    assert min(plane_error_px(frame, h)
+               for h in aligner.candidates(frame.left, frame.right)) > 100
+    assert min(plane_error_px(frame, h)
+               for h in aligner.peak_candidates(frame.left, frame.right)) < 2.0
+    off = CoarseAligner(CoarseConfig(shift_peaks=0))
+    assert off.peak_candidates(frame.left, frame.right).shape == (0, 3, 3)
+    with pytest.raises(ValueError, match='shift_peaks'):
+        CoarseConfig(shift_peaks=-1)
+
+
 @pytest.mark.parametrize('seed, floor', [(4, 'planks'), (9, 'random'), (3, 'tiles')])
 def test_the_photometric_refinement_moves_a_plane_onto_the_floor(seed, floor):
     frame = random_scene(seed, floor=floor)

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from domplane_ros.config import PlaneNodeConfig, VerificationSettings
+from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
+from domplane_ros.core import coarse as coarse_module
 from domplane_ros.core import verification
 from domplane_ros.core.estimator import estimate_plane, TwoStep
 from domplane_ros.core.features import detect_corners
@@ -295,7 +296,9 @@ def test_rivals_stopped_early_publish_the_same(monkeypatch, make):
         assert short.confidence == full.confidence
     else:
         assert short_picked == full_picked and 'swapped' in short.reason, short.reason
-        assert len(short_picked) == 2  # picked again, the rivals rechecked
+        # Picked again with the rivals rechecked, and once more in doubt (the coarse
+        # alignment's further shifts added).
+        assert len(short_picked) == 3
         return
     assert short_rounds < 0.9 * full_rounds, (short_rounds, full_rounds)
 
@@ -449,3 +452,17 @@ def test_a_plane_judged_twice_on_one_pair_is_verified_once(scene, monkeypatch):
     # Outside begin_pair / end_pair (other images may come), every judgement is verified.
     gate.judge(scene.left, scene.right, scene.homography)
     assert len(calls) == 3
+
+
+def test_a_search_in_doubt_tries_the_coarse_alignments_further_shifts(monkeypatch):
+    # A rough rig (tuning seed 239) whose floor disparity is 70-85 px at 320 px wide: the
+    # lower half's dominant shift and the prior give starts 29-160 px off, none verified;
+    # the strips' phase-correlation peaks include the floor's shift, and its plane is found.
+    frame = rough_rig(random_scene(239), random_rig_error(np.random.default_rng((239, 77))))
+    config = one_shot_search(PlaneNodeConfig())
+    result = PlanePipeline(config).process(frame.left, frame.right, 0)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
+    monkeypatch.setattr(coarse_module.CoarseAligner, 'peak_candidates',
+                        lambda self, left, right: np.zeros((0, 3, 3)))
+    without = PlanePipeline(config).process(frame.left, frame.right, 0)
+    assert not without.ok and 'no verified plane' in without.reason

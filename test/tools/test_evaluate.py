@@ -8,12 +8,15 @@ target is a strict xfail, so a fix shows up as an unexpected pass.
 from __future__ import annotations
 
 import csv
+from dataclasses import replace
 import importlib.util
 import math
 from pathlib import Path
 
 import cv2
+from domplane_ros.config import one_shot_search, PlaneNodeConfig
 from domplane_ros.core.homography import apply_homography, fit_homography
+from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools import evaluate
 from domplane_ros.tools.evaluation import datasets, methods, references, tables
 import numpy as np
@@ -111,6 +114,24 @@ def test_product_on_kitti_meets_the_road_target(kitti_cases):
     assert ours['off_road_as_plane'] < 0.05, ours
     assert ours['inliers'] > 120
     assert case.runs['ours'].mask.shape == case.left.shape
+
+
+@pytest.mark.parametrize('prior, most_px', [(datasets.KITTI_PRIOR, 0.6), (None, 1.5)],
+                         ids=['kitti_prior', 'default_prior'])
+def test_whole_kitti_image_meets_the_road_targets(kitti_reference, prior, most_px):
+    # Issue 11's targets, whole image, no ROI, from a cold start: under 0.6 px with a
+    # KITTI-like prior, 1.5 px with the default one. Measured 0.48 / 0.49 px with the search's
+    # winner refined photometrically at full resolution (0.67 / 0.60 px at 640 px wide).
+    config = PlaneNodeConfig() if prior is None else replace(PlaneNodeConfig(), prior=prior)
+    left = datasets.read_gray(KITTI / 'left.png')
+    right = datasets.read_gray(KITTI / 'right.png')
+    result = PlanePipeline(one_shot_search(config)).process(left, right, 0)
+    assert result.ok, result.reason
+    ys, xs = np.nonzero(kitti_reference.road)
+    road = np.stack([xs, ys], axis=1).astype(np.float64)
+    truth = apply_homography(kitti_reference.plane.homography(), road)
+    error = np.linalg.norm(apply_homography(result.homography, road) - truth, axis=1).mean()
+    assert error < most_px
 
 
 def test_orb_magsac_baseline_on_kitti(kitti_cases):
