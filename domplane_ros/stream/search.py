@@ -18,12 +18,14 @@ from typing import Callable
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import Features
-from domplane_ros.core.homography import as_homography
+from domplane_ros.core.homography import as_homography, corner_distance_px
 from domplane_ros.core.prior import prior_candidates, PriorSearch
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
+from domplane_ros.core.verification import REASON_LOW_SUPPORT
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork
+from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.swap import swap_rivals
@@ -46,6 +48,13 @@ RIVAL_RECHECK_UNIQUENESS = 2.25
 # 6022 published a plane one tile (151 px) off at uniqueness 1.29. 1.4 is where the confidence
 # reaches 1. Measured: docs/BENCHMARKS.md, trust round 8.
 DOUBT_UNIQUENESS = 1.4
+
+# A search in doubt that still has no verified plane refines its near misses photometrically
+# (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
+# little of the image, with at least NEAR_MISS_RATIO x verification.min_score. Measured: docs/
+# BENCHMARKS.md, trust round 8.
+NEAR_MISS_RATIO = 0.8
+NEAR_MISSES = 2
 
 __all__ = ['PlaneSearch', 'propagate']
 
@@ -164,6 +173,8 @@ class PlaneSearch:
             if more:
                 pool += more
                 best, verdict, unverified = self._checked_pick(search, pick)
+            if verdict is None and self._rescue_near_misses(step, problem, pool, size):
+                best, verdict, unverified = self._checked_pick(search, pick)
         if not pool and not rejection and len(search.tried) >= limit:
             # The corners gave no plane at all, not even a refused one (every start had too
             # few inliers: a floor of few corners): the coarse planes refined
@@ -196,6 +207,36 @@ class PlaneSearch:
         if verdict is None:
             return len(search.tried) >= limit
         return verdict.uniqueness < DOUBT_UNIQUENESS
+
+    def _rescue_near_misses(self, step: PairStep, problem: TwoStep,
+                            pool: list[PlaneEstimate], size: tuple[int, int]) -> bool:
+        """Add the near misses of the pool, refined photometrically; return whether any.
+
+        Near misses: planes refused only for explaining too little of the image, with at
+        least :data:`NEAR_MISS_RATIO` of ``verification.min_score``; the best
+        :data:`NEAR_MISSES` distinct ones by score (:meth:`CandidateWork.rescued`).
+        """
+        trust, cfg = self._trust(), self._config()
+        least = NEAR_MISS_RATIO * cfg.verification.min_score
+        judged = [(trust.judge(step.left, step.right, plane.homography, cfg.features.roi),
+                   plane) for plane in pool]
+        misses = sorted(((v, plane) for v, plane in judged
+                         if v.verification.reason == REASON_LOW_SUPPORT
+                         and v.verification.score >= least),
+                        key=lambda item: -item[0].verification.score)
+        work, added, tried = self._work(), False, []
+        for verdict, plane in misses:
+            if len(tried) == NEAR_MISSES:
+                break
+            if any(corner_distance_px(plane.homography, other, *size) < NEAR_LOCK_PX
+                   for other in tried):
+                continue
+            tried.append(plane.homography)
+            rescued, again = work.rescued(step, problem, plane, verdict)
+            if again.accepted:
+                pool.append(rescued)
+                added = True
+        return added
 
     def _done(self, best: PlaneEstimate | None, verdict: Verdict | None
               ) -> tuple[PlaneEstimate, Verdict] | None:

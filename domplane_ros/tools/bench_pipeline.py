@@ -218,6 +218,8 @@ def bench_lines(n_frames: int, seed: int) -> Row:
 
 
 def _stats(times: list[float]) -> tuple[float, float]:
+    if not times:  # a row with nothing timed (--cold-pairs 0)
+        return float('nan'), float('nan')
     ms = 1e3 * np.asarray(times)
     return float(np.median(ms)), float(np.percentile(ms, 95))
 

@@ -154,9 +154,12 @@ def test_orb_magsac_without_features_fails_as_a_value():
     assert 'no homography' in run.reason
 
 
-@pytest.mark.xfail(strict=True, reason='chessboard target missed: the prior (no roll or '
-                   'vertical offset between the unrectified cameras) gets no closer than '
-                   '~12 px to the board, and the cold start locks onto another solution')
+@pytest.mark.xfail(strict=True, reason='chessboard target missed (docs/METHOD.md, '
+                   'Chessboards): the search finds the boards (0.7-1.7 px on 11 of 13 pairs) '
+                   'but the gate refuses the true board planes themselves (disparity '
+                   'shrinking down the image: judged swapped on 8 of 13 pairs, 01 and 02 '
+                   'here; no ground on 1; score 0.12-0.21 < verification.min_score on 3); '
+                   'a gate relaxed to let boards through published a wrong plane, 72 px off')
 def test_product_on_chessboards_meets_the_board_target():
     cases = datasets.evaluate_chessboards(OPENCV, repeats=1)
     assert [c.pair for c in cases] == ['01', '02']
