@@ -362,9 +362,7 @@ def main(argv: list[str] | None = None) -> int:
             for row in bench_warm(width, height, args.frames, seed=5):
                 print_row(row)
                 rows.append(row)
-        # --cold-pairs 0: no cold row (its statistics of no pair would fail).
-        cold = [bench_cold(args.cold_pairs, seed=100)] if args.cold_pairs > 0 else []
-        for row in cold + [bench_lines(args.frames, seed=5)]:
+        for row in (bench_cold(args.cold_pairs, seed=100), bench_lines(args.frames, seed=5)):
             print_row(row)
             rows.append(row)
         chart = args.out / 'bench_pipeline.png'
