@@ -33,7 +33,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 import math
-from typing import Any
+from typing import Any, Generator
 
 import cv2
 import numpy as np
@@ -254,6 +254,47 @@ class CoarseAligner:
                 shifts.append((dx, dy))
         return shifts[1:]
 
+    def plain_steps(self, left: np.ndarray, right: np.ndarray
+                    ) -> Generator[None, None, np.ndarray]:
+        """Return :meth:`candidates` without the shifted alignment, as two resumable steps.
+
+        The forward flow, then the backward flow, the samples and the fits: the first
+        ``next()`` runs the first step (about 40 % of the whole), the second the rest and
+        raises ``StopIteration`` whose ``value`` is ``candidates(left, right,
+        shifted=False)``, the same planes bit for bit (the flows start from nothing, so other
+        calls in between change nothing). The images are copied: the caller may reuse its
+        buffers.
+
+        Args:
+            left: (H, W) uint8 left image.
+            right: (H, W) uint8 right image (the same size).
+
+        Returns:
+            A generator; its return value is (K, 3, 3) float64 as :meth:`candidates`.
+
+        Raises:
+            ValueError: If the images are not 2-D uint8 arrays of the same size (at once).
+
+        """
+        _check_pair(left, right)
+        scale = min(1.0, self.config.width_px / left.shape[1])
+        small_l = _reduce(left, scale).copy()
+        small_r = _reduce(right, scale).copy()
+        return self._plain_steps(small_l, small_r, scale)
+
+    def _plain_steps(self, small_l: np.ndarray, small_r: np.ndarray, scale: float
+                     ) -> Generator[None, None, np.ndarray]:
+        if min(small_l.shape) < MIN_SIZE_PX:
+            return np.zeros((0, 3, 3))
+        forward = self._flow.calc(small_l, small_r, None)
+        yield
+        backward = self._flow.calc(small_r, small_l, None)
+        to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
+        from_full = np.diag([scale, scale, 1.0])
+        out = [to_full @ h @ from_full for h in self._fitted(
+            *self._matched(small_l, forward, backward), small_l.shape[0])]
+        return np.stack([h / h[2, 2] for h in out]) if out else np.zeros((0, 3, 3))
+
     def _fitted(self, src: np.ndarray, dst: np.ndarray, height: int) -> list[np.ndarray]:
         """Return the homographies fitted to each image part's samples, one after the other."""
         cfg = self.config
@@ -344,13 +385,18 @@ class CoarseAligner:
         backward within ``max_forward_backward`` (default ``max_forward_backward_px``), by
         the DIS flow ``dis`` (default the alignment's).
         """
+        dis = self._flow if dis is None else dis
+        return self._matched(left, dis.calc(left, right, None), dis.calc(right, left, None),
+                             step, max_forward_backward)
+
+    def _matched(self, left: np.ndarray, forward: np.ndarray, backward: np.ndarray,
+                 step: int | None = None, max_forward_backward: float | None = None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """Return :meth:`_samples` from the (H, W, 2) float32 forward and backward flows."""
         cfg = self.config
         step = cfg.step_px if step is None else step
         limit = cfg.max_forward_backward_px if max_forward_backward is None \
             else max_forward_backward
-        dis = self._flow if dis is None else dis
-        forward = dis.calc(left, right, None)
-        backward = dis.calc(right, left, None)
         height, width = left.shape
         ys, xs = np.mgrid[2:height - 2:step, 2:width - 2:step]
         flow = forward[ys, xs]

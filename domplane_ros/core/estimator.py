@@ -42,7 +42,8 @@ from domplane_ros.core.lines import (as_segments, endpoints, LineMatcher, lines_
                                      screen_line_candidates, segment_lengths)
 from domplane_ros.core.nearest import NearestPoints
 from domplane_ros.core.potentials import make_potential, Potential
-from domplane_ros.core.prior import prior_candidates, PriorSearch, screen_candidates
+from domplane_ros.core.prior import (best_screened, prior_candidates, PriorSearch,
+                                     screen_candidates)
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 import numpy as np
 from scipy.spatial import cKDTree
@@ -464,6 +465,28 @@ class TwoStep:
             costs += self.line_weight * screen_line_candidates(
                 candidates, self.left_segments, self.matcher, threshold_px)
         return costs
+
+    def best_screened(self, candidates: np.ndarray, threshold_px: float, count: int
+                      ) -> np.ndarray:
+        """Return the indices of the ``count`` candidates of lowest screening energy.
+
+        Points alone: :func:`domplane_ros.core.prior.best_screened` (a strided coarse pass,
+        an exact pass over a short list); with segments, the best of
+        :meth:`screening_energy`.
+
+        Args:
+            candidates: (M, 3, 3) float64 homographies.
+            threshold_px: Truncation ``t``, pixels.
+            count: How many indices to return.
+
+        Returns:
+            (min(count, M),) intp indices, lowest energy first.
+
+        """
+        if self.n_points and not self.n_lines:
+            return best_screened(candidates, self.left, self.tree, threshold_px, count)
+        costs = self.screening_energy(candidates, threshold_px)
+        return np.argsort(costs, kind='stable')[:count]
 
 
 def _points_reason(left: np.ndarray, right: np.ndarray) -> str:

@@ -7,15 +7,21 @@ candidates, each refined on the features and verified. Done in one pair that cos
 at 640 x 480 (eight to ten warm pairs), so the challenge is a queue of tasks, one per locked
 pair, each bounded by one refinement or one screening (measured 10-45 ms):
 
-1. ``coarse``: the coarse alignment of this pair; its planes become ``coarse start`` tasks,
+1. ``coarse``: the coarse alignment of this pair in two steps, its forward DIS flow here
+   (the pipeline runs the ``screen`` task in the same pair), then a ``coarse step`` task,
+   the backward flow and the fits (at 640x480 about 9 + 5 and 9 + 4 ms CPU, where the
+   alignment alone was 22-27 ms and the screening 14-15); its planes, moved through the
+   cameras' motion since the pair they were aligned on, become ``coarse start`` tasks,
    except starts within :data:`NEAR_LOCK_PX` of the lock or of a start already queued (they
    converge to the lock or to the same plane: measured, starts 1.8 to 11.8 px from the lock
    ended within 0.22 px of it);
 2. one ``coarse start`` per pair: refined from the start moved through the cameras' motion
    since (``H' = M_right H M_left^-1``, as the lock's prediction), verified, and taken if it
    beats the lock; without a motion the coarse starts are dropped;
-3. ``screen``: the prior's screening on this pair; its best :data:`PRIOR_STARTS` candidates
-   (fixed homographies of the camera model, no motion) become ``prior start`` tasks.
+3. ``screen``: the prior's screening on this pair, the short way
+   (:meth:`~domplane_ros.core.estimator.TwoStep.best_screened`); its best
+   :data:`PRIOR_STARTS` candidates (fixed homographies of the camera model, no motion)
+   become ``prior start`` tasks.
 
 A challenger that wins ends the challenge; so do a lost lock and a reset.
 """
@@ -24,13 +30,14 @@ from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Iterable
+from typing import Generator, Iterable
 
 from domplane_ros.core.homography import corner_distance_px
 from domplane_ros.core.tracking import predict_plane_homography
 import numpy as np
 
 COARSE = 'coarse'
+COARSE_STEP = 'coarse step'
 SCREEN = 'screen'
 COARSE_START = 'coarse start'
 PRIOR_START = 'prior start'
@@ -45,10 +52,16 @@ NEAR_LOCK_PX = 8.0
 
 @dataclass
 class Task:
-    """One step of a challenge: its kind and, for a start, the (3, 3) start homography."""
+    """One step of a challenge: its kind and, for a start, the (3, 3) start homography.
+
+    A ``coarse step`` holds the alignment's remaining steps (a generator) and the cameras'
+    motion ``(M_left, M_right)`` since the pair it aligns.
+    """
 
     kind: str
     start: np.ndarray | None = None
+    steps: Generator[None, None, np.ndarray] | None = None
+    motions: tuple[np.ndarray, np.ndarray] = (np.eye(3), np.eye(3))
 
 
 class Challenge:
@@ -77,7 +90,12 @@ class Challenge:
         """
         kept: deque[Task] = deque()
         for task in self._tasks:
-            if task.kind == COARSE_START:
+            if task.kind == COARSE_STEP:
+                if motions is None:
+                    continue
+                task = Task(COARSE_STEP, steps=task.steps, motions=(
+                    motions[0] @ task.motions[0], motions[1] @ task.motions[1]))
+            elif task.kind == COARSE_START:
                 moved = None if motions is None else predict_plane_homography(
                     task.start, motions[0], motions[1])
                 if moved is None:
@@ -85,6 +103,36 @@ class Challenge:
                 task = Task(COARSE_START, moved)
             kept.append(task)
         self._tasks = kept
+
+    def align(self, task: Task, lock: np.ndarray, size: tuple[int, int]) -> bool:
+        """Run one step of the coarse alignment; queue it again, or its planes as starts.
+
+        Args:
+            task: A ``coarse step`` task (its steps generator and motion since).
+            lock: (3, 3) float64 the lock's homography in this pair.
+            size: ``(width, height)`` of the images, pixels.
+
+        Returns:
+            Whether the alignment is done (its planes queued).
+
+        """
+        assert task.kind == COARSE_STEP and task.steps is not None
+        try:
+            next(task.steps)
+        except StopIteration as done:
+            moved = (predict_plane_homography(plane, *task.motions) for plane in done.value)
+            self.add_coarse_starts([m for m in moved if m is not None], lock, size)
+            return True
+        self._tasks.appendleft(task)
+        return False
+
+    def take(self, kind: str) -> bool:
+        """Remove the first queued task of ``kind`` (to run now); return whether it was there."""
+        for task in self._tasks:
+            if task.kind == kind:
+                self._tasks.remove(task)
+                return True
+        return False
 
     def add_coarse_starts(self, starts: Iterable[np.ndarray], lock: np.ndarray,
                           size: tuple[int, int]) -> int:

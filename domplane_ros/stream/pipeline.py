@@ -18,13 +18,12 @@ from domplane_ros.core.estimator import can_widen, GRADUATED, TwoStep
 from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.mask import parallax_mask
-from domplane_ros.core.prior import PriorSearch
 from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC
-from domplane_ros.stream.challenge import (Challenge, COARSE, PRIOR_START, PRIOR_STARTS,
-                                           SCREEN)
+from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, COARSE_STEP,
+                                           PRIOR_START, PRIOR_STARTS, SCREEN, Task)
 from domplane_ros.stream.detection import (carried_features, detect_features, full_mask,
                                            level_features)
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
@@ -419,15 +418,20 @@ class PlanePipeline:
             self._challenge = None
             return False
         if task.kind == COARSE:
-            self._challenge.add_coarse_starts(
-                self._trust.coarse_candidates(step.left, step.right, shifted=False),
-                step.estimate.homography, size)
-        elif task.kind == SCREEN:
-            search = PriorSearch(problem, self._searcher.candidates(size),
-                                 self.config.prior.screen_threshold_px)
-            self._challenge.add_prior_starts(search.candidates[i] for i in
-                                             search.ranked()[:PRIOR_STARTS])
-        else:
+            # The alignment's first step (its forward flow) and the screening share a pair.
+            steps = self._trust.coarse_steps(step.left, step.right)
+            if steps is not None:
+                self._challenge.align(Task(COARSE_STEP, steps=steps),
+                                      step.estimate.homography, size)
+            if self._challenge.take(SCREEN):
+                task = Task(SCREEN)
+        elif task.kind == COARSE_STEP:
+            self._challenge.align(task, step.estimate.homography, size)
+        if task.kind == SCREEN:
+            candidates = self._searcher.candidates(size)
+            self._challenge.add_prior_starts(candidates[i] for i in problem.best_screened(
+                candidates, self.config.prior.screen_threshold_px, PRIOR_STARTS))
+        elif task.kind in (COARSE_START, PRIOR_START):
             options = (self._work().options if task.kind == PRIOR_START
                        else self.config.estimator)
             result = problem.estimate(task.start, options, widen=False)

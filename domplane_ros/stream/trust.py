@@ -29,7 +29,7 @@ from collections import deque
 from dataclasses import dataclass, replace
 import math
 import statistics
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Generator, Sequence
 
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
@@ -282,6 +282,18 @@ class TrustGate:
         if key == 'peaks':
             return self._coarse.peak_candidates(left, right)
         return self._coarse.candidates(left, right, bool(key))
+
+    def coarse_steps(self, left: np.ndarray, right: np.ndarray
+                     ) -> Generator[None, None, np.ndarray] | None:
+        """Return the plain coarse alignment as resumable steps (the lock's challenge).
+
+        :meth:`CoarseAligner.plain_steps`: ``coarse_candidates(left, right, shifted=False)``
+        spread over two ``next()`` calls; None if the coarse candidates are disabled or the
+        images differ in size.
+        """
+        if not self.settings.coarse_candidates or left.shape != right.shape:
+            return None
+        return self._coarse.plain_steps(left, right)
 
     def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                 near_px: float = REFINE_NEAR_PX, finish: bool = False) -> np.ndarray | None:

@@ -155,3 +155,20 @@ def test_a_portrait_image_is_refined_too():
     refined = aligner.refine(frame.left, frame.right, refined)
     assert refined is not None
     assert plane_error_px(frame, refined) < 0.5 * plane_error_px(frame, moved)
+
+
+def test_the_plain_alignment_in_steps_gives_the_same_planes_bit_for_bit():
+    frame = random_scene(9)
+    other = random_scene(10)
+    aligner = CoarseAligner()
+    whole = aligner.candidates(frame.left, frame.right, shifted=False)
+    steps = aligner.plain_steps(frame.left.copy(), frame.right.copy())
+    ran = 0
+    with pytest.raises(StopIteration) as done:
+        while True:
+            next(steps)
+            ran += 1
+            # Other alignments in between (the search's, another pair's) change nothing.
+            aligner.candidates(other.left, other.right)
+    assert ran == 1 and whole.shape[0] >= 1
+    np.testing.assert_array_equal(done.value.value, whole)

@@ -119,3 +119,24 @@ def test_few_candidates_are_all_screened_exactly():
     assert candidates.shape[0] <= prior.SCREEN_EXACT
     np.testing.assert_allclose(prior.screen_candidates(candidates, left, tree, 12.0),
                                _exact(candidates, left, tree, 12.0), rtol=1e-9)
+
+
+@pytest.mark.parametrize('seed', range(2))
+def test_the_short_screening_gives_the_best_candidates_of_the_full_one(seed):
+    """The lock's challenge refines the best two: the same two, in order, as the search's.
+
+    The prior's candidates only (the challenge's): of the swapped cameras' candidates none
+    fits a correctly ordered pair, their energies lie within 5 % of each other and the short
+    list's sample picks others (on scene 300).
+    """
+    left, tree = _features(300 + seed)
+    candidates = prior.prior_candidates(PriorConfig(), 640, 480)
+    full = np.argsort(prior.screen_candidates(candidates, left, tree, 12.0), kind='stable')
+    short = prior.best_screened(candidates, left, tree, 12.0, 2)
+    np.testing.assert_array_equal(short, full[:2])
+    # The exact energy decides the order (fails if the coarse order were returned).
+    exact = _exact(candidates[short], left, tree, 12.0)
+    assert exact[0] <= exact[1]
+    few = candidates[:prior.SHORT_EXACT]
+    np.testing.assert_array_equal(prior.best_screened(few, left, tree, 12.0, 3),
+                                  np.argsort(_exact(few, left, tree, 12.0), kind='stable')[:3])

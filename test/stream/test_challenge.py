@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 from domplane_ros.core.homography import corner_distance_px
-from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, distinct_starts,
-                                           NEAR_LOCK_PX, PRIOR_START, SCREEN)
+from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, COARSE_STEP,
+                                           distinct_starts, NEAR_LOCK_PX, PRIOR_START, SCREEN,
+                                           Task)
 import numpy as np
 
 SIZE = (640, 480)
@@ -82,3 +83,34 @@ def test_the_challenge_time_is_reported_as_part_of_the_estimate():
                             for r in results[1:]]
     assert all(challenge == 0.0 for challenge, _ in reported[0])
     assert all(0.0 < challenge <= estimate for challenge, estimate in reported[1])
+
+
+def test_the_alignment_runs_in_steps_and_its_planes_follow_the_cameras():
+    def steps():  # an alignment of three steps whose planes are 80 and 30 px shifts
+        yield
+        yield
+        return np.stack([_shift(80.0), _shift(30.0)])
+
+    lock = _shift(-50.0)
+    challenge = Challenge()
+    assert challenge.next_task().kind == COARSE
+    challenge.align(Task(COARSE_STEP, steps=steps()), lock, SIZE)
+    for motion in ((_shift(10.0), _shift(0.0, 4.0)), (_shift(-2.0), np.eye(3))):
+        challenge.follow(motion)
+        task = challenge.next_task()
+        assert task.kind == COARSE_STEP
+        challenge.align(task, lock, SIZE)
+    # Moved through both motions (H' = M_r2 M_r1 H M_l1^-1 M_l2^-1): 80 - 8 px, 4 px down;
+    # the 30 px plane is now 22 px right, 4 px down.
+    first = challenge.next_task()
+    assert first.kind == COARSE_START
+    assert corner_distance_px(first.start, _shift(72.0, 4.0), *SIZE) < 1e-9
+    assert corner_distance_px(challenge.next_task().start, _shift(22.0, 4.0), *SIZE) < 1e-9
+    # The pipeline runs the screening in the alignment's first pair: taken out of the queue.
+    assert challenge.take(SCREEN) and not challenge.take(SCREEN) and challenge.done
+    # Without a motion the alignment's planes would be stale: the task is dropped.
+    challenge = Challenge()
+    challenge.next_task()
+    challenge.align(Task(COARSE_STEP, steps=steps()), lock, SIZE)
+    challenge.follow(None)
+    assert _drain(challenge) == [SCREEN]

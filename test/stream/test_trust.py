@@ -198,8 +198,12 @@ def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
     lock = result.homography
     near = [lock, _shifted(lock, 3.0, -2.0)]
     far = [_shifted(lock, 40.0), _shifted(lock, 41.0)]  # two starts, one refined
-    monkeypatch.setattr(pipeline._trust, 'coarse_candidates',
-                        lambda left, right, shifted=True: np.stack(near + far))
+
+    def aligned(left, right):  # the challenge's alignment: two steps, then its planes
+        yield
+        return np.stack(near + far)
+
+    monkeypatch.setattr(pipeline._trust, 'coarse_steps', aligned)
     starts = []
     original = TwoStep.estimate
 
@@ -208,9 +212,10 @@ def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
         return original(self, init, options, **kwargs)
 
     monkeypatch.setattr(TwoStep, 'estimate', recording)
-    # The challenge is spread over pairs: the coarse alignment in the first, then one start
-    # per pair (moved through the tracked motion: here the same images, so nearly nowhere).
-    for i in range(2, 6):
+    # The challenge is spread over pairs: the coarse alignment in the first two, then one
+    # start per pair (moved through the tracked motion: here the same images, so nearly
+    # nowhere).
+    for i in range(2, 7):
         pipeline.process(scene.left, scene.right, i * PERIOD_NS)
     height, width = scene.left.shape
     # (The lock itself is each pair's warm start, so it is not counted.)
