@@ -223,12 +223,17 @@ class CandidateWork:
         scores a tenth less than the floor itself (tuning rough rigs 12 and 47: 1.0 px off,
         0.23 against the truth's 0.26-0.27). Up to :data:`PHOTOMETRIC_FINISH_ROUNDS` rounds at
         the finishing width, stopping at the first verified plane or a round that does not
-        raise the score. The caller picks among the results as usual (uniqueness, rivals).
+        raise the score or that would put the features' predictions more than
+        :data:`TIGHT_POLISH_MAX_MOVE_PX` (median) from the near miss's own: the rescue is for a
+        plane a pixel off, not for one a tile period away. The caller picks among the results
+        as usual (uniqueness, rivals).
         """
+        start = estimate.homography
         for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
             refined = self.trust.refined(step.left, step.right, estimate.homography,
                                          finish=True)
-            if refined is None or check_homography(refined):
+            if (refined is None or check_homography(refined)
+                    or _median_move(problem, start, refined) > TIGHT_POLISH_MAX_MOVE_PX):
                 break
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
             if again.verification.score <= verdict.verification.score:

@@ -483,6 +483,12 @@ def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch)
     monkeypatch.setattr(search_module, 'NEAR_MISSES', 0)
     without = PlanePipeline(config).process(frame.left, frame.right, 0)
     assert not without.ok and 'explains too little' in without.reason
+    # The rescue moves the near miss by about a pixel: a move limit under that refuses it (the
+    # limit keeps a rescue from walking a plane a tile period away).
+    monkeypatch.setattr(search_module, 'NEAR_MISSES', 2)
+    monkeypatch.setattr(candidates_module, 'TIGHT_POLISH_MAX_MOVE_PX', 0.05)
+    held = PlanePipeline(config).process(frame.left, frame.right, 0)
+    assert not held.ok and 'explains too little' in held.reason
 
 
 @pytest.mark.parametrize('case', ['truth', 'swapped', 'too far under'])
