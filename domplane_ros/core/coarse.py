@@ -172,10 +172,8 @@ class CoarseAligner:
             ValueError: If the images are not 2-D uint8 arrays of the same size.
 
         """
-        _check_pair(left, right)
         cfg = self.config
-        scale = min(1.0, cfg.width_px / left.shape[1])
-        small_l, small_r = _reduce(left, scale), _reduce(right, scale)
+        small_l, small_r, scale = _working_pair(left, right, cfg.width_px)
         if min(small_l.shape) < MIN_SIZE_PX:
             return np.zeros((0, 3, 3))
         to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
@@ -209,10 +207,8 @@ class CoarseAligner:
             ValueError: If the images are not 2-D uint8 arrays of the same size.
 
         """
-        _check_pair(left, right)
         cfg = self.config
-        scale = min(1.0, cfg.width_px / left.shape[1])
-        small_l, small_r = _reduce(left, scale), _reduce(right, scale)
+        small_l, small_r, scale = _working_pair(left, right, cfg.width_px)
         if min(small_l.shape) < MIN_SIZE_PX or cfg.shift_peaks == 0:
             return np.zeros((0, 3, 3))
         out = []
@@ -347,10 +343,8 @@ class CoarseAligner:
             ValueError: If the images are not 2-D uint8 arrays of the same size.
 
         """
-        _check_pair(left, right)
         width = self.config.finish_width_px if finish else self.config.refine_width_px
-        scale = min(1.0, width / left.shape[1])
-        small_l, small_r = _reduce(left, scale), _reduce(right, scale)
+        small_l, small_r, scale = _working_pair(left, right, width)
         if min(small_l.shape) < MIN_SIZE_PX:
             return None
         to_small = np.diag([scale, scale, 1.0])
@@ -420,6 +414,18 @@ def _check_pair(left: np.ndarray, right: np.ndarray) -> None:
             or right.dtype != np.uint8):
         raise ValueError('left and right must be 2-D uint8 images of the same size, got '
                          f'{left.shape} {left.dtype} and {right.shape} {right.dtype}')
+
+
+def _working_pair(left: np.ndarray, right: np.ndarray, width_px: int
+                  ) -> tuple[np.ndarray, np.ndarray, float]:
+    """Check the pair; return both (h, w) uint8 images reduced to at most ``width_px`` wide.
+
+    Returns the reduced left and right images and the scale (at most 1) they were reduced by.
+    Raises ValueError as :func:`_check_pair`.
+    """
+    _check_pair(left, right)
+    scale = min(1.0, width_px / left.shape[1])
+    return _reduce(left, scale), _reduce(right, scale), scale
 
 
 def _dominant_shift(left: np.ndarray, right: np.ndarray) -> tuple[float, float]:
