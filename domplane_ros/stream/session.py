@@ -191,6 +191,10 @@ class StreamSession:
         self.activity = CameraActivity(topics, start, tick_s)
         self.latencies_ms: deque[float] = deque(maxlen=LATENCY_WINDOW)
         self.last_result: FrameResult | None = None
+        # The last result with the lock state the pipeline had right after it: a status shows
+        # both together (the pipeline's state changes while a pair is processed, e.g. locked
+        # before its mask is computed, so the live state could sit beside the previous result).
+        self._shown: tuple[FrameResult | None, str] = (None, self.pipeline.state)
         self.last_error = ''
         self.last_decode_error: ImageDecodeError | None = None
         # The cameras of the last status: (topic, received, images/s, age in seconds).
@@ -214,6 +218,7 @@ class StreamSession:
                 self.stamp_checks = StampChecks(self.sync.slop_ns, self.counts)
             self.pipeline.update_config(config)
             self.config = config
+            self._shown = (self._shown[0], self.pipeline.state)
 
     def receive(self, side: Side, stamp_ns: int, msg: Any, now: float
                 ) -> tuple[list[Pair], list[str]]:
@@ -270,10 +275,12 @@ class StreamSession:
         with self._pipeline_lock:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,
                                            reset=pair.after_reset, joint_speed=joint_speed)
+            state = self.pipeline.state
         frame = ProcessedPair(pair, result, left, 1e3 * (time.perf_counter() - t0))
         # Recorded before publishing, so a status built meanwhile (the diagnostics timer)
         # never shows the pipeline's new lock state beside no result.
         self.last_result = result
+        self._shown = (result, state)
         self._count(frame)
         if publish is not None:
             publish(frame)
@@ -288,6 +295,7 @@ class StreamSession:
         self.last_error = clip_text(f'image rejected: {err}', LAST_ERROR_CHARS)
         self.last_decode_error = err
         self.last_result = None
+        self._shown = (None, self._shown[1])
 
     def _count(self, frame: ProcessedPair) -> None:
         result, counters = frame.result, self.counters
@@ -337,14 +345,15 @@ class StreamSession:
         self.last_cameras = cameras
         warning, self.input_warning = self.input_warning, ''
         counters = self.counters
+        last_result, lock_state = self._shown
         return plane_status(
             rate=rate, latencies_ms=list(self.latencies_ms), pairs=counters.pairs,
             processed=counters.processed, dropped_busy=dropped_busy,
             dropped_sync=self.sync.stats().dropped,
             decode_errors=counters.decode_errors + counters.undecodable_messages,
-            lock_state=self.pipeline.state,
+            lock_state=lock_state,
             reinitialisations=self.pipeline.stats.reinitialisations,
-            consecutive_failures=counters.consecutive_failures, last_result=self.last_result,
+            consecutive_failures=counters.consecutive_failures, last_result=last_result,
             last_error=self.last_error, input_counts=(self.counts,), input_warning=warning,
             cameras=cameras, silence_s=self.config.transport.silence_s,
             joint_speed=joint_speed, implausible_joint_speed=implausible_joint_speed,

@@ -34,7 +34,7 @@ def test_node_without_joint_states_reports_no_joint_speed(ros_context, scene):  
         assert _plane_error(h.homographies[-1], scene) < 1.0
         values = _values(h.diagnostics)
         assert values['head joint speed [rad/s]'] == 'n/a'
-        assert values['warm start'] in ('prediction', 'last', 'search')
+        assert values['warm start'] in ('prediction', 'last', 'search'), values
         assert h.node.joint_speed() is None
         assert not h.node.session.last_result.fast_motion
     finally:

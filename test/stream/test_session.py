@@ -128,3 +128,28 @@ def test_a_replay_clock_in_nanoseconds_starts_at_the_first_image():
     _feed(session, 5, now=T0 + 5 * 10**8)
     _, _, values = session.status(now=T0 + 5 * 10**8, rate=5.0)
     assert dict(values)['/right/image_raw rate [images/s]'] == '5.00'   # 1 image in 0.2 s
+
+
+def test_a_status_built_while_a_pair_is_processed_shows_a_consistent_state():
+    # The diagnostics timer may build a status while the worker processes a pair: the
+    # pipeline's lock state then already changes (locked before the pair's mask is computed)
+    # while the last result is still the previous one. The status shows the last result with
+    # the state the pipeline had after it, never the live state beside an older result
+    # (seen over DDS as 'locked' beside warm start 'none').
+    session = StreamSession(start=0.0)
+    seen = []
+    process = session.pipeline.process
+
+    def midway(*args, **kwargs):
+        real = session.pipeline._state
+        session.pipeline._state = 'locked'  # as while a pair that locks is being processed
+        seen.append(dict(session.status(0.05)[2]))
+        session.pipeline._state = real
+        return process(*args, **kwargs)
+
+    session.pipeline.process = midway
+    _feed(session, 0, now=0.0)
+    assert seen[0]['lock state'] == 'searching' and seen[0]['warm start'] == 'none'
+    values = dict(session.status(0.1)[2])
+    assert values['lock state'] == session.pipeline.state
+    assert values['warm start'] == (session.last_result.warm_start or 'none')
