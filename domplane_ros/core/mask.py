@@ -47,7 +47,8 @@ from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
-from domplane_ros.core.residual import beyond_linear_range, flow_shift, local_fit, LocalFit
+from domplane_ros.core.residual import (beyond_linear_range, flow_shift, local_fit, LocalFit,
+                                        MIN_GRADIENT_ENERGY)
 from domplane_ros.core.scratch import constant
 import numpy as np
 
@@ -61,6 +62,10 @@ DEFAULT_FOCAL_PX = (400.0, 900.0)
 
 # The one-step estimate is linear in the shift up to about a pixel at the working scale.
 _LINEAR_RANGE_PX = 1.0
+# The one-sided estimate reads the shift true to scale (residual.local_fit's one_sided); not
+# the mask's yet: with it, KITTI's road and the gain-mismatched scenes lose plane
+# (docs/MASK.md round 10).
+_ONE_SIDED = False
 # Zero-shift NCC below which a textured window is off the plane without a measured parallax.
 _REJECT_NCC = 0.5
 # Where an obstacle of the minimum height would not show, an obstacle needs this many times
@@ -318,7 +323,7 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
 
     """
     flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
-    fit = local_fit(left, warped, int(config.window_px), coarse)
+    fit = local_fit(left, warped, int(config.window_px), coarse, _ONE_SIDED)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
     beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
                                  float(config.ncc_threshold), _LINEAR_RANGE_PX)
@@ -428,6 +433,8 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     residual += shift_inf
     off &= residual >= threshold
     _set_where(labels, OBSTACLE, off)
+    if fit.energy is not None:  # no texture along the epipolar direction: not measured
+        measurable &= fit.energy >= np.float32(MIN_GRADIENT_ENERGY)
     _set_where(magnitude, NOT_MEASURED, ~measurable)
     return labels, magnitude, decidable
 

@@ -1,7 +1,8 @@
 """The residual parallax after the plane warp, measured densely (:mod:`domplane_ros.core.mask`).
 
 :func:`local_fit` gives, per pixel of the working image, the one-step one-dimensional
-Lucas-Kanade shift along the epipolar direction (the image x axis for the prior's head) with
+Lucas-Kanade shift along the epipolar direction (the image x axis for the prior's head; or,
+with ``one_sided``, the shift under linear interpolation, true to scale, and its confidence) with
 the window statistics that say whether to trust it (zero-shift normalised correlation, left
 window variance), and the coarse shift of DIS optical flow for large parallax;
 :func:`shifted_ncc` the correlation of the same windows with the warped image moved by a
@@ -15,12 +16,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
-from domplane_ros.core.scratch import scratch
+from domplane_ros.core.scratch import constant, scratch
 import numpy as np
 
 # Regulariser of the one-step estimate, grey levels^2 per pixel^2 (windows without texture
 # across the epipolar direction fall back to zero shift).
 _REGULARISER = 2.0
+# Confidence a window's one-sided shift needs to be measured: the window variance of the image
+# difference along the epipolar direction, grey levels^2 per pixel^2 (docs/MASK.md round 10).
+MIN_GRADIENT_ENERGY = 2.0
 # DIS settings over the ultrafast preset (see _dis_flow).
 _DIS_FINEST_SCALE = 1
 _DIS_PATCH_STRIDE = 8
@@ -42,6 +46,10 @@ class LocalFit:
         flow_shift: (h, w) float32 signed residual parallax from DIS optical flow, working
             pixels: coarse, but not limited to small shifts.
         mean: (h, w) float32 grey-level mean of the left window.
+        energy: (h, w) float32 confidence of a one-sided ``shift`` (:func:`local_fit` with
+            ``one_sided``): the window variance of the image difference along the epipolar
+            direction it was read on (grey levels^2 per pixel^2; below
+            :data:`MIN_GRADIENT_ENERGY` no shift was measured); None for the one-step shift.
     """
 
     shift: np.ndarray
@@ -49,6 +57,7 @@ class LocalFit:
     variance: np.ndarray
     flow_shift: np.ndarray
     mean: np.ndarray
+    energy: np.ndarray | None = None
 
 
 def _dis_flow() -> cv2.DISOpticalFlow:
@@ -70,13 +79,15 @@ def _dis_flow() -> cv2.DISOpticalFlow:
 
 
 def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
-              coarse: np.ndarray | None = None) -> LocalFit:
+              coarse: np.ndarray | None = None, one_sided: bool = False) -> LocalFit:
     """Return the one-step 1-D Lucas-Kanade shift and the zero-shift NCC of every window.
 
     With ``g`` the mean x gradient of both images and ``e`` the difference of the two
     images after removing each window's mean, the shift that aligns them is
-    ``sum(g e) / (sum(g^2) + regulariser)`` (Gauss-Newton from zero shift). Float32 OpenCV
-    calls into this thread's scratch arrays (module docstring).
+    ``sum(g e) / (sum(g^2) + regulariser)`` (Gauss-Newton from zero shift); with
+    ``one_sided``, :func:`_one_sided_shift`'s shift and confidence instead (true to scale;
+    docs/MASK.md round 10). Float32 OpenCV calls into this thread's scratch arrays (module
+    docstring).
 
     Args:
         left: (h, w) uint8 left image at the working scale.
@@ -85,6 +96,7 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
         coarse: (h, w) float32 :func:`flow_shift` of the images if already measured (it is
             global: the mask measures it on the whole images and fits only the rows it
             needs); None to measure it here.
+        one_sided: Measure the shift by :func:`_one_sided_shift` (with its confidence).
 
     Returns:
         The :class:`LocalFit`; its arrays are scratch arrays, valid until the next call.
@@ -106,9 +118,26 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
     norm = cv2.multiply(var_a, var_b, dst=tmp)
     np.maximum(norm, np.float32(1e-6), out=norm)
     ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
+    energy = None
+    if one_sided:
+        shift, energy = _one_sided_shift(left, warped, mean_a, mean_b, size)
+    else:
+        shift = _one_step_shift(left, warped, mean_a, mean_b, size)
+    if coarse is None:
+        coarse = flow_shift(left, warped)
+    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse,
+                    mean=mean_a, energy=energy)
+
+
+def _one_step_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
+                    mean_b: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Return the one-step shift of :func:`local_fit` ((h, w) float32 scratch, working px)."""
+    shape = left.shape
+    f32 = cv2.CV_32F
+    tmp = scratch('tmp', shape)
     # The Sobel filter is linear: one pass over a + b gives the sum of both gradients.
-    grad = cv2.Sobel(cv2.add(left, warped, dst=tmp, dtype=f32), f32, 1, 0, dst=var_b, ksize=3,
-                     scale=0.0625)
+    grad = cv2.Sobel(cv2.add(left, warped, dst=tmp, dtype=f32), f32, 1, 0,
+                     dst=scratch('var_b', shape), ksize=3, scale=0.0625)
     diff = cv2.subtract(warped, left, dst=scratch('diff', shape), dtype=f32)
     diff -= mean_b
     diff += mean_a
@@ -116,10 +145,101 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
     den = _window_product(grad, grad, size, mean_b)
     den += np.float32(_REGULARISER)
     shift = cv2.divide(num, den, dst=num)
-    if coarse is None:
-        coarse = flow_shift(left, warped)
-    return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse,
-                    mean=mean_a)
+    return shift
+
+
+def _one_sided_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
+                     mean_b: np.ndarray, size: tuple[int, int]
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the window's residual parallax under linear interpolation, and its confidence.
+
+    A shift ``u`` of the warped image between whole pixels is what linear interpolation
+    makes of it (``cv2.remap``, ``cv2.resize`` by area at the working scale for whole
+    full-resolution pixels): ``warped(x + u) = warped(x) + u d(x)`` with ``d`` the forward
+    difference for ``u >= 0`` and the backward one for ``u <= 0``. Per side, the least-squares
+    ``u`` with an offset (``cov(d, gain left - warped) / var(d)`` over the window, ``gain`` the
+    ratio of the images' standard deviations: a one-sided difference correlates with the
+    image, so a gain left in the difference would read as a shift) is clamped to its
+    side (the minimum of a convex quadratic on a half-line), and the side that explains more
+    of the difference wins: the shift reads sub-pixel shifts true to scale (docs/MASK.md
+    round 10), where the centred gradient of both images with a regulariser read half of
+    them on the rendered floors. The residual parallax is ``-u`` (a point nearer than the
+    plane shows at ``x - r`` in the warped image).
+
+    Args:
+        left: (h, w) uint8 left image at the working scale.
+        warped: (h, w) uint8 right image warped into the left view.
+        mean_a: (h, w) float32 window mean of ``left``.
+        mean_b: (h, w) float32 window mean of ``warped``.
+        size: The window ``(side, side)``.
+
+    Returns:
+        (h, w) float32 residual parallax, working pixels (positive: nearer than the plane;
+        0 where the confidence is below :data:`MIN_GRADIENT_ENERGY`: the zero-shift
+        correlation alone judges such a window), and (h, w) float32 its confidence: the
+        window variance of the chosen side's ``d`` (grey levels^2 per pixel^2; the shift's
+        noise is the difference's pixel noise over the square root of it and of the
+        window's pixel count). Scratch arrays.
+
+    """
+    shape = left.shape
+    if shape[1] < 2:  # no difference along x: nothing measured
+        nothing = np.zeros(shape, np.float32)
+        return nothing, nothing.copy()
+    f32 = cv2.CV_32F
+    tmp = scratch('tmp', shape)
+    gain = _gain(left, warped)
+    diff = cv2.addWeighted(warped, 1.0, left, -gain, 0.0, dst=scratch('diff', shape), dtype=f32)
+    mean_diff = cv2.addWeighted(mean_b, 1.0, mean_a, -gain, 0.0,
+                                dst=scratch('mean_diff', shape))
+    step = scratch('step', shape)  # d(x) = warped(x + 1) - warped(x); 0 in the last column
+    cv2.subtract(warped[:, 1:], warped[:, :-1], dst=step[:, :-1], dtype=f32)
+    step[:, -1] = 0.0
+    # The window mean of d is the difference of the window means one pixel apart.
+    step_mean = scratch('step_mean', shape)
+    cv2.subtract(mean_b[:, 1:], mean_b[:, :-1], dst=step_mean[:, :-1])
+    step_mean[:, -1] = 0.0
+    energy = _window_product(step, step, size, scratch('energy', shape))
+    energy -= cv2.multiply(step_mean, step_mean, dst=tmp)
+    ahead = _window_product(step, diff, size, scratch('ahead', shape))
+    ahead -= cv2.multiply(step_mean, mean_diff, dst=tmp)
+    # The backward difference at x is d(x - 1): its products with the difference at x.
+    behind = scratch('behind', shape)
+    cv2.multiply(step[:, :-1], diff[:, 1:], dst=behind[:, 1:])
+    behind[:, 0] = 0.0
+    cv2.blur(behind, size, dst=behind)
+    cv2.multiply(step_mean[:, :-1], mean_diff[:, 1:], dst=tmp[:, 1:])
+    tmp[:, 0] = 0.0
+    behind -= tmp
+    # r = -u: the forward side holds r <= 0, the backward side r >= 0 (clamped to 0), each
+    # over its own variance (the backward one's is the forward one's a pixel to the left).
+    floor = constant(1e-6, shape, np.float32)
+    zero = constant(0.0, shape, np.float32)
+    cv2.min(ahead, zero, dst=ahead)
+    cv2.max(behind, zero, dst=behind)
+    back_energy = scratch('back_energy', shape)
+    back_energy[:, 1:] = energy[:, :-1]
+    back_energy[:, 0] = energy[:, 0]
+    cv2.divide(ahead, cv2.max(energy, floor, dst=tmp), dst=tmp)
+    cv2.divide(behind, cv2.max(back_energy, floor, dst=diff), dst=diff)
+    # The side that explains more of the difference: the larger covariance times shift.
+    chosen = cv2.compare(cv2.multiply(ahead, tmp, dst=ahead),
+                         cv2.multiply(behind, diff, dst=behind), cv2.CMP_GT)
+    shift = cv2.copyTo(tmp, chosen, diff)
+    cv2.copyTo(energy, chosen, back_energy)
+    # Too little texture along the epipolar direction: no shift measured (zero; the
+    # zero-shift correlation alone judges the window).
+    cv2.copyTo(zero, (back_energy < np.float32(MIN_GRADIENT_ENERGY)).view(np.uint8), shift)
+    return shift, back_energy
+
+
+def _gain(left: np.ndarray, warped: np.ndarray) -> float:
+    """Return the ratio of the warped image's standard deviation to the left one's (0.5-2)."""
+    _, std_left = cv2.meanStdDev(left)
+    _, std_warped = cv2.meanStdDev(warped)
+    if std_left[0, 0] < 1.0:
+        return 1.0
+    return float(np.clip(std_warped[0, 0] / std_left[0, 0], 0.5, 2.0))
 
 
 def _window_product(first: np.ndarray, second: np.ndarray, size: tuple[int, int],

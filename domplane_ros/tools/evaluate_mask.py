@@ -13,7 +13,9 @@ on the same images:
   instead of 0.1 (more pixels unknown, thinner bottoms of walls and furniture marked plane);
 * with ``--baseline FILE``, ``baseline``: the ``parallax_mask`` of another version of
   ``core/mask.py`` (``git show COMMIT:domplane_ros/core/mask.py > FILE``), with the defaults,
-  to compare a change before and after in one run.
+  to compare a change before and after in one run; ``FILE`` may be a folder holding that
+  ``mask.py`` and the same version's ``residual.py``, ``occlusion.py``, ``parallax.py``
+  (:func:`load_baseline`).
 
 Data, each scored with the plane homography named in the table:
 
@@ -98,14 +100,45 @@ TITLES = {'ncc': 'ncc (before)', 'baseline': 'baseline (--baseline)',
           'parallax': 'parallax (now)', 'parallax_low': f'parallax, min height {LOW_MIN_HEIGHT}'}
 
 
+# Core modules of the mask that a baseline folder may hold beside its mask.py.
+BASELINE_MODULES = ('residual', 'occlusion', 'parallax')
+
+
 def load_baseline(path: Path) -> Callable[..., ParallaxMask]:
     """Return ``parallax_mask`` of a ``core/mask.py`` file (another version of the module).
+
+    ``path`` is that file, or a folder holding it and, optionally, the same version's
+    :data:`BASELINE_MODULES` (``residual.py`` ...): those stand in for today's while the
+    baseline's ``mask.py`` is loaded, so a change of the measurement has its own before.
 
     Raises:
         ValueError: If the file cannot be loaded or has no ``parallax_mask``.
 
     """
-    spec = importlib.util.spec_from_file_location('baseline_mask', path)
+    folder = path if path.is_dir() else None
+    mask_file = path / 'mask.py' if folder else path
+    saved = {}
+    try:
+        for name in BASELINE_MODULES if folder else ():
+            if (folder / f'{name}.py').is_file():
+                key = f'domplane_ros.core.{name}'
+                saved[key] = sys.modules.get(key)
+                sys.modules[key] = _load_module(folder / f'{name}.py', f'baseline_{name}')
+        module = _load_module(mask_file, 'baseline_mask')
+    finally:
+        for key, previous in saved.items():
+            if previous is None:
+                sys.modules.pop(key, None)
+            else:
+                sys.modules[key] = previous
+    if not callable(getattr(module, 'parallax_mask', None)):
+        raise ValueError(f'{mask_file} has no parallax_mask function')
+    return module.parallax_mask
+
+
+def _load_module(path: Path, name: str) -> object:
+    """Return the module executed from ``path`` under ``name``; ValueError if it fails."""
+    spec = importlib.util.spec_from_file_location(name, path)
     if spec is None or spec.loader is None:
         raise ValueError(f'cannot load {path} as a Python module')
     module = importlib.util.module_from_spec(spec)
@@ -113,9 +146,7 @@ def load_baseline(path: Path) -> Callable[..., ParallaxMask]:
         spec.loader.exec_module(module)
     except (OSError, SyntaxError, ImportError) as err:
         raise ValueError(f'cannot load {path}: {err}') from err
-    if not callable(getattr(module, 'parallax_mask', None)):
-        raise ValueError(f'{path} has no parallax_mask function')
-    return module.parallax_mask
+    return module
 
 
 def masks(focal_px: tuple[float, float] = DEFAULT_FOCAL_PX,
@@ -430,7 +461,9 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='also write the README picture (docs/overlay.png) to this file')
     parser.add_argument('--baseline', type=Path, default=None, metavar='FILE',
                         help='another version of core/mask.py (git show '
-                             'COMMIT:domplane_ros/core/mask.py > FILE) as an extra column')
+                             'COMMIT:domplane_ros/core/mask.py > FILE), or a folder with it '
+                             'and its residual.py, occlusion.py, parallax.py, as an extra '
+                             'column')
     args = parser.parse_args(argv)
     baseline = None
     if args.baseline is not None:

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 from pathlib import Path
+import shutil
+import sys
 
 import cv2
-from domplane_ros.core import mask
+from domplane_ros.core import mask, residual
 from domplane_ros.tools import evaluate_mask
 from domplane_ros.tools.evaluation.datasets import KITTI_PRIOR
 from domplane_ros.tools.evaluation.references import read_gray
@@ -53,11 +55,18 @@ def test_parallax_mask_on_kitti_with_the_reference_plane(kitti_figures):
 
 def test_tool_writes_the_sheet_and_the_table(tmp_path):
     out = tmp_path / 'mask'
-    # --baseline: another version of core/mask.py as a column (here this one: same figures).
+    # --baseline: another version of core/mask.py as a column, here a folder with this
+    # version's mask.py and residual.py (same figures); the residual module loaded for it
+    # stands in only while the baseline is loaded.
+    folder = tmp_path / 'baseline'
+    folder.mkdir()
+    for module in (mask, residual):
+        shutil.copy(module.__file__, folder)
     rc = evaluate_mask.main(['--scenes', '1', '--indoor', '1', '--repeats', '2',
                              '--data', str(KITTI.parent), '--out', str(out),
-                             '--baseline', mask.__file__])
+                             '--baseline', str(folder)])
     assert rc == 0
+    assert sys.modules['domplane_ros.core.residual'] is residual
     text = (out / 'mask_summary.txt').read_text(encoding='utf-8')
     for row in ('plane IoU (median)', 'road marked plane', 'walls + furniture marked plane',
                 'mask time, median ms (CPU time)', 'baseline (--baseline)',
