@@ -33,8 +33,9 @@ from typing import Any, Callable, Generator, Sequence
 
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
+from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import (PlaneVerification, swap_evidence,
+from domplane_ros.core.verification import (agreement_maps, PlaneVerification, swap_evidence,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
 import numpy as np
@@ -73,6 +74,13 @@ MAX_BELOW_FRACTION = 0.03
 # floor, 0.6 and 0.8 px from the truth over it, were measured 8-20 px apart where they
 # extrapolate beyond it.
 DISTINCT_PX = 8.0
+# The first row (share of the height) of that grid for the ground: the lowest 40 %.
+GROUND_ROWS = 0.6
+# A plane's period siblings (TrustGate.siblings) are refined photometrically from the plane
+# moved by a repeat of its texture, with the samples' residual flow up to this many working
+# pixels (the repeat under perspective is not one translation; the first photometric
+# refinement of a coarse plane takes the same, stream/candidates.py PHOTOMETRIC_FIRST_NEAR_PX).
+SIBLING_NEAR_PX = 8.0
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -143,7 +151,7 @@ class TrustGate:
         self._locked_frames = 0
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
-        self._coarse_planes: dict[bool | str, np.ndarray] = {}
+        self._coarse_planes: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
@@ -218,6 +226,8 @@ class TrustGate:
 
         """
         check = self._verify(left, right, homography, roi)
+        if self.settings.plane == 'any':
+            return self._judge_any(check, locked)
         height, width = left.shape
         swap = swap_evidence(homography, width, height)
         slope = swap.disparity_slope
@@ -244,6 +254,23 @@ class TrustGate:
                            f'{100 * check.below_fraction:.0f} % of the textured image lies '
                            f'beyond the plane (> {100 * MAX_BELOW_FRACTION:.0f} %); a plane '
                            'through obstacles above the floor?', ground=False)
+        return self._held(check, locked)
+
+    def _judge_any(self, check: PlaneVerification, locked: bool) -> Verdict:
+        """Return the verdict of ``verification.plane: any``: no ground or swap checks.
+
+        The plane need not be the ground, so neither the sign of its disparity slope nor
+        what it explains at the image bottom nor what lies beyond it says anything; the
+        verification and the lock's history still do.
+        """
+        if not check.accepted:
+            return Verdict(False, check, f'plane not verified: {check.reason} (score '
+                           f'{check.score:.2f} < verification.min_score '
+                           f'{self.settings.min_score:g})')
+        return self._held(check, locked)
+
+    def _held(self, check: PlaneVerification, locked: bool) -> Verdict:
+        """Return the verdict on a verified plane: a locked one must keep its score."""
         lock = self.lock_score
         if locked and lock is not None and check.score < self.settings.drop_ratio * lock:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
@@ -303,6 +330,46 @@ class TrustGate:
         """
         return self._coarse.refine(left, right, homography, near_px, finish)
 
+    def siblings(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                 roi: Sequence[float] | None = None) -> list[np.ndarray]:
+        """Return the plane's period siblings: the plane moved by its texture's repeats.
+
+        On a periodic texture a look-alike some periods off explains much of the pattern; the
+        true plane is then among its siblings (and explains more: the pattern's border, the
+        rest of it). The repeats are :func:`~domplane_ros.core.periodic.period_vectors` of
+        the left image over the plane's support (at the verification's working width); each
+        of ``+-p1``, ``+-p2``, ``+-(p1 + p2)``, ``+-(p1 - p2)`` moves the plane in the right
+        image and is refined photometrically (:meth:`refined`, :data:`SIBLING_NEAR_PX`).
+        Unverified: the caller judges them. Cached for the pair of :meth:`begin_pair`.
+
+        Returns:
+            (3, 3) float64 homographies (none when the texture does not repeat).
+
+        """
+        key = ('siblings', np.asarray(homography, np.float64).tobytes())
+        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
+        cached = self._coarse_planes.get(key) if same else None
+        if cached is not None:
+            return list(cached)
+        config = self.config(left.shape[1])
+        maps = agreement_maps(left, right, homography, config, roi)
+        scale = left.shape[1] / maps.left.shape[1]
+        vectors = scale * period_vectors(maps.left, maps.support)
+        shifts = list(vectors)
+        if len(vectors) == 2:
+            shifts += [vectors[0] + vectors[1], vectors[0] - vectors[1]]
+        out = []
+        for shift in shifts:
+            for sign in (1.0, -1.0):
+                dx, dy = sign * shift
+                moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ homography
+                refined = self._coarse.refine(left, right, moved, SIBLING_NEAR_PX)
+                if refined is not None:
+                    out.append(refined)
+        if same:
+            self._coarse_planes[key] = np.array(out).reshape(-1, 3, 3)
+        return out
+
     def challenge_due(self) -> bool:
         """Return whether the lock is challenged in this frame."""
         period = self.settings.challenge_period
@@ -351,8 +418,9 @@ class TrustGate:
             judged += [(None, rival, self.judge(left, right, rival, roi))
                        for rival in rival_planes or []]
             best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
+            rows = 0.0 if self.settings.plane == 'any' else GROUND_ROWS
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                            if _rival(v, h, best_h, width, height)]
+                            if _rival(v, h, best_h, width, height, rows)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
             if verdict.uniqueness >= CHALLENGE_MARGIN:
@@ -410,7 +478,7 @@ class TrustGate:
 
 
 def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,
-           height: int) -> bool:
+           height: int, rows: float = GROUND_ROWS) -> bool:
     """Return whether a judged plane competes with the best for uniqueness.
 
     A plane of swapped cameras always does (the other hypothesis about the head, however
@@ -418,12 +486,19 @@ def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: in
     9 px off it, within 8 px of each other at the image bottom); a plane of this head only
     when distinct; walls and planes through obstacles never.
     """
-    return verdict.ground and (verdict.swapped or _distinct(homography, best, width, height))
+    return verdict.ground and (verdict.swapped
+                               or _distinct(homography, best, width, height, rows))
 
 
-def _distinct(first: np.ndarray, second: np.ndarray, width: int, height: int) -> bool:
-    """Return whether two planes map the bottom of the image > DISTINCT_PX apart (median)."""
-    xs, ys = np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(0.6 * (height - 1),
+def _distinct(first: np.ndarray, second: np.ndarray, width: int, height: int,
+              rows: float = GROUND_ROWS) -> bool:
+    """Return whether two planes map the image > DISTINCT_PX apart (median).
+
+    Over a 5 x 5 grid from row ``rows * (height - 1)`` to the bottom: the ground's rows
+    (:data:`GROUND_ROWS`), or the whole image (0) for ``verification.plane: any``, where the
+    plane may be anywhere.
+    """
+    xs, ys = np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(rows * (height - 1),
                                                                    height - 1, 5))
     points = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)]).T
     a, b = first @ points, second @ points
