@@ -21,6 +21,14 @@ re-plugged) even if the new score still passes the absolute threshold. Every
 ``challenge_period`` locked frames a *challenger*, the best plane of the coarse photometric
 alignment (:class:`~domplane_ros.core.coarse.CoarseAligner`), is refined and verified; if it
 explains clearly more of the image than the lock, the lock is replaced.
+
+With ``verification.plane: any`` the plane need not be the ground (a board, a wall): the
+disparity-slope, bottom and beyond checks are off (so swapped cameras are not detected: they
+cannot be told from one such plane), distinct planes are told over the whole image, not its
+bottom, and a search's winner is judged beside its period siblings (:meth:`TrustGate.siblings`,
+the plane moved by its texture's repeats): on a checkerboard a look-alike some squares off
+wins only if it explains clearly more than they do. A winner must also be one plane
+(:data:`MAX_RESIDUAL_FLOW_PX`), not a fit through the far field of a room.
 """
 
 from __future__ import annotations
@@ -31,8 +39,10 @@ import math
 import statistics
 from typing import Any, Callable, Generator, Sequence
 
+import cv2
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
+from domplane_ros.core.flatness import residual_flow_px
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, PlaneVerification, swap_evidence,
@@ -81,6 +91,11 @@ GROUND_ROWS = 0.6
 # pixels (the repeat under perspective is not one translation; the first photometric
 # refinement of a coarse plane takes the same, stream/candidates.py PHOTOMETRIC_FIRST_NEAR_PX).
 SIBLING_NEAR_PX = 8.0
+# With verification.plane any, a search's winner must lie on one plane: the median residual
+# flow over its supporting pixels (core/flatness.py) at most this many pixels. Measured on the
+# rendered boards' tuning seeds (sim/boards.py): true boards 0.02-0.08 px, the planes through
+# the room behind them that a search published 0.42-1.13 px.
+MAX_RESIDUAL_FLOW_PX = 0.3
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -153,6 +168,7 @@ class TrustGate:
         self._working: WorkingPair | None = None
         self._coarse_planes: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
+        self._flow: cv2.DISOpticalFlow | None = None
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
         """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
@@ -424,6 +440,9 @@ class TrustGate:
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
             if verdict.uniqueness >= CHALLENGE_MARGIN:
+                several = self._several_planes(left, right, best_h, roi)
+                if several:
+                    return None, None, several
                 return best, verdict, ''
             kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
             return None, None, (f'ambiguous: a {kind} explains the image almost as well '
@@ -437,6 +456,34 @@ class TrustGate:
             return None, None, ''
         closest = max(reasons, key=lambda v: v.score)
         return None, None, closest.reason
+
+    def _several_planes(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                        roi: Sequence[float] | None) -> str:
+        """Return why a winner of ``verification.plane: any`` is no one plane ('' if it is).
+
+        A plane fitted through surfaces at several depths (the far field of a room) passes
+        the verification's working scale; its supporting pixels are then about a pixel off it
+        (:func:`~domplane_ros.core.flatness.residual_flow_px`). The ground checks refuse such
+        planes in ``ground`` mode, so it runs in ``any`` mode only. Once per plane and pair.
+        """
+        if self.settings.plane != 'any':
+            return ''
+        key = ('flow', np.asarray(homography, np.float64).tobytes())
+        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
+        residual = self._coarse_planes.get(key) if same else None
+        if residual is None:
+            if self._flow is None:
+                self._flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+            maps = agreement_maps(left, right, homography, self.config(left.shape[1]), roi)
+            residual = np.array(residual_flow_px(left, right, homography, maps.support,
+                                                 self._flow))
+            if same:
+                self._coarse_planes[key] = residual
+        if float(residual) <= MAX_RESIDUAL_FLOW_PX:
+            return ''
+        return (f'not one plane: its supporting pixels are {float(residual):.2f} px off it '
+                f'(median residual flow > {MAX_RESIDUAL_FLOW_PX:g}); surfaces at several '
+                'depths, such as the room behind a small board?')
 
     def polish(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                roi: Sequence[float] | None = None) -> np.ndarray:

@@ -10,7 +10,8 @@ rough focal and baseline ranges), the same for every seed, never set from a scen
 
 A published plane is *correct* when its mean transfer error over the visible board is below
 1 px, *wrong* when above 5 px. Precision = correct / published; recall = correct / pairs.
-Tuning seeds start at 0; ``--held-out`` uses seeds from 1000, run once for the report.
+Tuning seeds start at 0; ``--held-out`` uses seeds from 1000, run once for the report;
+``--first-seed 2000`` a second held-out range.
 
 ``--chessboards`` also runs the OpenCV chessboard pairs of ``--data``/opencv_samples (the
 check, not a tuning set): per pair the error against the homography fitted to the board's
@@ -43,7 +44,7 @@ MODES = ('ground', 'any')
 
 def board_config(plane: str, min_score: float | None = None) -> PlaneNodeConfig:
     """Return the evaluation's configuration for ``verification.plane`` ``plane``."""
-    config = PlaneNodeConfig(prior=CHESSBOARD_PRIOR)
+    config = PlaneNodeConfig(prior=CHESSBOARD_PRIOR)  # as datasets.evaluate_chessboards
     verification = replace(config.verification, plane=plane)
     if min_score is not None:
         verification = replace(verification, min_score=min_score)
@@ -113,6 +114,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = tool_parser(__doc__)
     parser.add_argument('--pairs', type=int, default=40, help='rendered seeds')
     parser.add_argument('--held-out', action='store_true', help='seeds from 1000')
+    parser.add_argument('--first-seed', type=int, default=None,
+                        help='first seed (overrides --held-out; 2000 on: a second held-out '
+                        'range)')
     parser.add_argument('--chessboards', action='store_true',
                         help='also run the OpenCV chessboard pairs')
     parser.add_argument('--data', type=Path, default=default_data_dir())
@@ -122,6 +126,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='verification.min_score (default: the parameter default)')
     args = parser.parse_args(argv)
     first = 1000 if args.held_out else 0
+    if args.first_seed is not None:
+        first = args.first_seed
     seeds = list(range(first, first + args.pairs))
     with one_core():
         rows = rendered_rows(seeds, args.modes, args.min_score) if args.pairs > 0 else []

@@ -18,9 +18,11 @@ from domplane_ros.stream import search as search_module
 from domplane_ros.stream.candidates import photometric_estimate
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import plane_status
+from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.trust import TrustGate
 import numpy as np
 import pytest
+from truth import two_depths
 
 ANY = VerificationSettings(plane='any')
 FACING = PriorConfig(focal_px=(400.0, 900.0), baseline_over_height=(0.05, 0.5),
@@ -113,3 +115,15 @@ def test_diagnostics_say_which_plane_is_sought():
 
     assert values('ground').startswith('ground')
     assert 'swapped cameras not detected' in values('any')
+
+
+def test_a_plane_through_two_depths_is_not_published_in_any_mode(monkeypatch):
+    left, right = two_depths(5.0, 7.0)
+    mid = np.array([[1.0, 0.0, -6.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    gate = TrustGate(ANY)
+    assert gate.judge(left, right, mid).accepted  # the working scale cannot tell
+    best, _, reason = gate.pick(left, right, [photometric_estimate(mid)])
+    assert best is None and reason.startswith('not one plane'), reason
+    # Switched off, the same pick publishes it.
+    monkeypatch.setattr(trust_module, 'MAX_RESIDUAL_FLOW_PX', 10.0)
+    assert TrustGate(ANY).pick(left, right, [photometric_estimate(mid)])[0] is not None
