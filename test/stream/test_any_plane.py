@@ -15,10 +15,10 @@ from domplane_ros.core.verification import swap_evidence
 from domplane_ros.sim.boards import board_scene
 from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import search as search_module
+from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.candidates import photometric_estimate
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import plane_status
-from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.trust import TrustGate
 import numpy as np
 import pytest
@@ -72,8 +72,6 @@ def test_the_leaning_candidates_mirror_the_rows_and_turn_the_slope():
 
 
 def test_the_pipeline_publishes_the_board_in_any_mode_without_swap_rivals(board, monkeypatch):
-    assert not PlanePipeline(_config('ground')).process(board.left, board.right, 0).ok
-
     def no_rivals(*args, **kwargs):
         raise AssertionError('no swapped rivals in any mode')
 
