@@ -20,7 +20,22 @@ from rclpy.context import Context
 # Jazzy's replacement for ROS_LOCALHOST_ONLY (which it still honours, with a warning).
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
-_SESSION_DOMAIN_ID = random.SystemRandom().randint(1, 200)
+
+def _session_domain_id() -> int:
+    """Return this test process's DDS domain id, distinct between pytest-xdist workers.
+
+    Without xdist: a random id in [1, 200]. Under xdist the workers of one run share a run id
+    (``PYTEST_XDIST_TESTRUNUID``); the base comes from it and each worker adds its index, so two
+    workers of one run never share a domain (their nodes would see each other's topics).
+    """
+    run_uid = os.environ.get('PYTEST_XDIST_TESTRUNUID')
+    worker = os.environ.get('PYTEST_XDIST_WORKER', '')
+    if not run_uid or not worker.startswith('gw'):
+        return random.SystemRandom().randint(1, 200)
+    return (int(run_uid, 16) + int(worker[2:])) % 200 + 1
+
+
+_SESSION_DOMAIN_ID = _session_domain_id()
 _HERE = Path(__file__).parent
 
 
