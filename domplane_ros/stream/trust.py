@@ -436,9 +436,10 @@ class TrustGate:
             judged += [(None, rival, self.judge(left, right, rival, roi))
                        for rival in rival_planes or []]
             best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
-            rows = 0.0 if self.settings.plane == 'any' else GROUND_ROWS
+            # With plane any, distinct over the whole image (a board need not be at the bottom).
+            where = {'rows': 0.0} if self.settings.plane == 'any' else {}
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                            if _rival(v, h, best_h, width, height, rows)]
+                            if _rival(v, h, best_h, width, height, **where)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
             if verdict.uniqueness >= CHALLENGE_MARGIN:
