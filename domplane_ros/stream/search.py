@@ -180,7 +180,7 @@ class PlaneSearch:
             if more:
                 pool += more
                 best, verdict, unverified = self._checked_pick(search, pick)
-            if verdict is None and self._rescue_near_misses(step, problem, pool, size):
+            if verdict is None and self._rescue_near_misses(step, problem, pool, feats, size):
                 best, verdict, unverified = self._checked_pick(search, pick)
         if verdict is not None and self._config().verification.plane == 'any':
             best, verdict, unverified = self._sibling_pick(step, search, pool, best, pick)
@@ -241,12 +241,15 @@ class PlaneSearch:
         return pick()
 
     def _rescue_near_misses(self, step: PairStep, problem: TwoStep,
-                            pool: list[PlaneEstimate], size: tuple[int, int]) -> bool:
+                            pool: list[PlaneEstimate], feats: Features,
+                            size: tuple[int, int]) -> bool:
         """Add the near misses of the pool, refined photometrically; return whether any.
 
         Near misses: ground planes of the right sign refused only for explaining too little of
         the image, with at least :data:`NEAR_MISS_RATIO` of ``verification.min_score``; the best
-        :data:`NEAR_MISSES` distinct ones by score (:meth:`CandidateWork.rescued`).
+        :data:`NEAR_MISSES` distinct ones by score (:meth:`CandidateWork.rescued`). A rescued
+        plane joins the pool only if verified and it passes the checks every pool plane passed
+        (a valid homography, inliers spread over the region): its features were matched again.
         """
         trust, cfg = self._trust(), self._config()
         least = NEAR_MISS_RATIO * cfg.verification.min_score
@@ -269,7 +272,8 @@ class PlaneSearch:
                 continue
             tried.append(plane.homography)
             rescued, again = work.rescued(step, problem, plane, verdict)
-            if again.accepted:
+            if again.accepted and not self._checks.rejection_reason(
+                    rescued, feats, size, bounds=False):
                 pool.append(rescued)
                 added = True
         return added

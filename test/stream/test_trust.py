@@ -517,7 +517,7 @@ def test_only_a_ground_plane_of_the_right_sign_is_a_near_miss(scene, monkeypatch
     step = SimpleNamespace(left=frame.left, right=frame.right)
     pool = [photometric_estimate(frame.homography)]
     size = (frame.left.shape[1], frame.left.shape[0])
-    assert not search._rescue_near_misses(step, None, pool, size)
+    assert not search._rescue_near_misses(step, None, pool, None, size)
     if case == 'truth':
         assert len(refined) == 1
         assert refined[0].verification.reason == verification.REASON_LOW_SUPPORT

@@ -201,3 +201,24 @@ def test_nothing_lies_beyond_the_true_floor():
         scene = random_scene(seed)
         check = verify_plane(scene.left, scene.right, scene.homography)
         assert check.below_fraction < 0.2 * trust_module.MAX_BELOW_FRACTION, (seed, check)
+
+
+@pytest.mark.parametrize('bottom, swapped_expected', [(0.018, False), (0.5, True)])
+def test_a_plane_sloping_the_swapped_way_is_a_swap_only_if_it_fills_the_bottom(
+        bottom, swapped_expected, scene, monkeypatch):
+    # The wall plane of a faint tiled floor (tuning seed 11 of the faint cases): verified over
+    # the image (score 0.42) with a disparity slope of -0.03 px per row, yet explaining 1.8 %
+    # of the bottom. It is a wall, not the floor of swapped cameras (which fills the bottom
+    # like any floor): no swap reported and no rival of the floor. The same plane filling
+    # the bottom is a swap.
+    verification = verify_plane(scene.left, scene.right, scene.homography)
+    faked = replace(verification, accepted=True, score=0.42, bottom_score=bottom)
+    gate = TrustGate(VerificationSettings())
+    monkeypatch.setattr(gate, '_verify', lambda *args: faked)
+    sloping = np.array([[1.0, 0.03, -20.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    verdict = gate.judge(scene.left, scene.right, sloping)
+    assert not verdict.accepted
+    assert verdict.swapped is swapped_expected, verdict.reason
+    assert verdict.ground is swapped_expected
+    assert ('swapped' in verdict.reason) is swapped_expected, verdict.reason
+    assert ('not the ground' in verdict.reason) is not swapped_expected, verdict.reason
