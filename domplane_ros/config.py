@@ -126,6 +126,7 @@ class VerificationSettings(_Section):
     section: ClassVar[str] = 'verification'
 
     min_score: float = 0.25
+    plane: str = 'ground'
     scale: float = 0.25
     drop_ratio: float = 0.5
     challenge_period: int = 10

@@ -17,6 +17,7 @@ from domplane_ros.errors import ConfigError, wire_repr
 POTENTIAL_NAMES = ('least_squares', 'truncated_quadratic', 'huber', 'geman_mcclure')
 FEATURE_KINDS = ('points', 'lines', 'both')
 IMAGE_TRANSPORTS = ('raw', 'compressed')
+PLANE_KINDS = ('ground', 'any')
 
 
 @dataclass(frozen=True)
@@ -141,6 +142,13 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'pixels sideways or 1.5 up or down does not (12 and 6 px at 640 x 480); the '
               'confidence is 0.5 there, 0 at min_score - 0.1 and 1 at min_score + 0.1.',
               0.11, 0.89),
+    ParamSpec('verification.plane', 'ground', 'str',
+              'Which dominant plane to look for: ground (the floor or road below the head: its '
+              'disparity must grow toward the image bottom, the plane must explain the bottom '
+              'of the image with nothing beyond it, and swapped cameras are detected) or any '
+              '(a board, a wall, a table top: those ground checks are off, planes leaning '
+              'toward the head are searched too, and swapped cameras cannot be detected).',
+              choices=PLANE_KINDS),
     ParamSpec('verification.scale', 0.25, 'float',
               'Image scale at which planes are verified (the working width is kept within '
               '64..480 px); the scores were calibrated at 0.25.', 0.05, 1.0),

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import cv2
 from domplane_ros.core.homography import apply_homography
 import numpy as np
 
@@ -11,3 +12,17 @@ def transfer_error_px(scene, homography: np.ndarray) -> float:
     pts = np.argwhere(scene.plane_left & scene.visible_in_right)[:, ::-1].astype(float)
     return float(np.mean(np.linalg.norm(apply_homography(homography, pts)
                                         - apply_homography(scene.homography, pts), axis=1)))
+
+
+def two_depths(shift_left_px: float, shift_right_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return a textured pair whose left and right image halves move by different shifts."""
+    rng = np.random.default_rng(5)
+    texture = cv2.GaussianBlur(rng.uniform(0, 255, (240, 360)).astype(np.float32), (0, 0), 1.5)
+    texture = cv2.normalize(texture, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    left = texture[:, 20:340].copy()
+    right = left.copy()
+    for columns, shift in ((slice(0, 160), shift_left_px), (slice(160, 320), shift_right_px)):
+        move = np.float32([[1, 0, -shift], [0, 1, 0]])
+        moved = cv2.warpAffine(texture, move, (360, 240), flags=cv2.INTER_LINEAR)[:, 20:340]
+        right[:, columns] = moved[:, columns]
+    return left, right

@@ -151,6 +151,42 @@ def swapped_candidates(candidates: np.ndarray) -> np.ndarray:
     return inverse / inverse[:, 2:3, 2:3]
 
 
+def leaning_candidates(candidates: np.ndarray, height: int) -> np.ndarray:
+    """Return the candidates' planes mirrored top to bottom: planes leaning toward the head.
+
+    The prior's camera model describes a plane below the head (its disparity grows toward the
+    image bottom). Mirroring the image rows (``y -> height - 1 - y``, on both images) keeps
+    the baseline's side and turns each such plane into one above or in front of the head
+    whose disparity grows toward the image *top*: a ceiling, or a board or wall leaning its
+    top toward the cameras, which ``verification.plane: any`` looks for as well. The
+    principal point is mirrored with the rows.
+
+    Args:
+        candidates: (M, 3, 3) float64 homographies (:func:`prior_candidates`).
+        height: Image height in pixels.
+
+    Returns:
+        (M, 3, 3) float64 homographies ``F H F`` with ``F`` the row mirror, ``H[2, 2] == 1``.
+
+    """
+    flip = np.array([[1.0, 0.0, 0.0], [0.0, -1.0, height - 1.0], [0.0, 0.0, 1.0]])
+    mirrored = flip @ candidates @ flip
+    return mirrored / mirrored[:, 2:3, 2:3]
+
+
+def search_candidates(prior: PriorConfig, width: int, height: int, plane: str = 'ground'
+                      ) -> np.ndarray:
+    """Return the candidates a search screens for ``verification.plane`` (ground or any).
+
+    ``ground``: :func:`prior_candidates`; ``any``: those followed by their
+    :func:`leaning_candidates` (twice as many).
+    """
+    candidates = prior_candidates(prior, width, height)
+    if plane == 'ground':
+        return candidates
+    return np.concatenate([candidates, leaning_candidates(candidates, height)])
+
+
 @functools.lru_cache(maxsize=16)
 def _candidate_grid(prior: PriorConfig, width: int, height: int) -> np.ndarray:
     out = [plane_homography(f, bh, tilt, verg, width, height, prior.principal_point_px)

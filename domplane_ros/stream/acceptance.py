@@ -17,7 +17,7 @@ from domplane_ros.config import PlaneNodeConfig, PriorConfig
 from domplane_ros.core.features import Features, roi_to_pixels
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.lines import endpoints
-from domplane_ros.core.prior import prior_candidates
+from domplane_ros.core.prior import search_candidates
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.stream.health import homography_problem, inlier_spread, InputCounts
 import numpy as np
@@ -127,7 +127,8 @@ class AcceptanceChecks:
     def prior_bounds(self, size: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
         """Return the low and high image-corner positions the prior's candidates reach."""
         if size not in self._bounds_cache:
-            cands = prior_candidates(_bounds_prior(self._config().prior), *size)
+            cfg = self._config()
+            cands = search_candidates(_bounds_prior(cfg.prior), *size, cfg.verification.plane)
             corners = _image_corners(*size)
             mapped = np.stack([apply_homography(h, corners) for h in cands])
             margin = _PRIOR_BOUNDS_MARGIN * float(np.hypot(*size))

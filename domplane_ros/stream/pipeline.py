@@ -109,10 +109,11 @@ class PlanePipeline:
     def update_config(self, config: PlaneNodeConfig) -> None:
         """Use a new configuration from the next frame on, keeping the warm start.
 
-        A changed prior or initial homography drops the warm start.
+        A changed prior, initial homography or ``verification.plane`` drops the warm start.
         """
         if (config.prior != self.config.prior
-                or config.initial_homography != self.config.initial_homography):
+                or config.initial_homography != self.config.initial_homography
+                or config.verification.plane != self.config.verification.plane):
             self.reset()
             self._checks.clear()
             self._searcher.prior_changed()

@@ -19,12 +19,12 @@ from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import Features
 from domplane_ros.core.homography import as_homography, corner_distance_px
-from domplane_ros.core.prior import prior_candidates, PriorSearch
+from domplane_ros.core.prior import PriorSearch, search_candidates
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
 from domplane_ros.core.verification import REASON_LOW_SUPPORT
 from domplane_ros.stream.acceptance import AcceptanceChecks
-from domplane_ros.stream.candidates import CandidateWork
+from domplane_ros.stream.candidates import CandidateWork, photometric_estimate
 from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
@@ -90,6 +90,7 @@ class _Search:
     rivals: list[np.ndarray] | None = None  # planes of swapped cameras (stream/swap.py)
     rivals_full: bool = False  # rivals refined to the configured tolerance (rechecked)
     peaks_tried: bool = False  # the coarse alignment's further shifts refined (in doubt)
+    siblings_tried: bool = False  # the winner's period siblings judged (plane any)
 
 
 class PlaneSearch:
@@ -137,7 +138,9 @@ class PlaneSearch:
     def candidates(self, size: tuple[int, int]) -> np.ndarray:
         """Return the prior's (N, 3, 3) candidates for images of ``size`` (width, height)."""
         if size not in self._candidates_cache:
-            self._candidates_cache[size] = prior_candidates(self._config().prior, *size)
+            cfg = self._config()
+            self._candidates_cache[size] = search_candidates(cfg.prior, *size,
+                                                             cfg.verification.plane)
         return self._candidates_cache[size]
 
     def step(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
@@ -160,7 +163,11 @@ class PlaneSearch:
             return self._done(best, verdict)
         pool, rejection, limit = self._pool(step, search, problem, feats, size, motions)
         step.warm_start = 'search'
-        rivals = lambda: self._rivals(search, step, problem, feats, size)  # noqa: E731
+        # Swapped cameras cannot be told from one plane that need not be the ground: with
+        # verification.plane any there are no swapped rivals (the leaning planes of the
+        # candidates are searched instead).
+        rivals = (None if self._config().verification.plane == 'any' else
+                  lambda: self._rivals(search, step, problem, feats, size))
         roi = self._config().features.roi
         pick = lambda: self._trust().pick(step.left, step.right, pool, roi, rivals)  # noqa: E731
         best, verdict, unverified = self._checked_pick(search, pick)
@@ -175,6 +182,8 @@ class PlaneSearch:
                 best, verdict, unverified = self._checked_pick(search, pick)
             if verdict is None and self._rescue_near_misses(step, problem, pool, feats, size):
                 best, verdict, unverified = self._checked_pick(search, pick)
+        if verdict is not None and self._config().verification.plane == 'any':
+            best, verdict, unverified = self._sibling_pick(step, search, pool, best, pick)
         if not pool and not rejection and len(search.tried) >= limit:
             # The corners gave no plane at all, not even a refused one (every start had too
             # few inliers: a floor of few corners): the coarse planes refined
@@ -207,6 +216,29 @@ class PlaneSearch:
         if verdict is None:
             return len(search.tried) >= limit
         return verdict.uniqueness < DOUBT_UNIQUENESS
+
+    def _sibling_pick(self, step: PairStep, search: _Search, pool: list[PlaneEstimate],
+                      best: PlaneEstimate,
+                      pick: Callable[[], tuple[PlaneEstimate | None, Verdict | None, str]]
+                      ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
+        """Judge the winner's period siblings with the pool and pick again (plane ``any``).
+
+        :meth:`TrustGate.siblings`: on a periodic board a look-alike some squares off can win
+        a search that never judged the board's plane; its siblings include that plane, which
+        then wins, or the pick is ambiguous. Once per search.
+        """
+        if search.siblings_tried:
+            return pick()
+        search.siblings_tried = True
+        size = (step.left.shape[1], step.left.shape[0])
+        known = [plane.homography for plane in pool]
+        for sibling in self._trust().siblings(step.left, step.right, best.homography,
+                                              self._config().features.roi):
+            if all(corner_distance_px(sibling, other, *size) >= NEAR_LOCK_PX
+                   for other in known):
+                pool.append(photometric_estimate(sibling))
+                known.append(sibling)
+        return pick()
 
     def _rescue_near_misses(self, step: PairStep, problem: TwoStep,
                             pool: list[PlaneEstimate], feats: Features,

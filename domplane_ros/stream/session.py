@@ -357,4 +357,5 @@ class StreamSession:
             last_error=self.last_error, input_counts=(self.counts,), input_warning=warning,
             cameras=cameras, silence_s=self.config.transport.silence_s,
             joint_speed=joint_speed, implausible_joint_speed=implausible_joint_speed,
-            implausible_joint_states=implausible_joint_states)
+            implausible_joint_states=implausible_joint_states,
+            plane=self.config.verification.plane)

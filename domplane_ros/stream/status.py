@@ -18,6 +18,11 @@ FAILURES_FOR_ERROR = 3
 JOINT_SPEED_KEY = 'head joint speed [rad/s]'
 
 
+# What ``plane sought`` says for each ``verification.plane``.
+PLANE_SOUGHT = {'ground': 'ground (swapped cameras detected)',
+                'any': 'any (ground and swap checks off: swapped cameras not detected)'}
+
+
 def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, processed: int,
                  dropped_busy: int, dropped_sync: int, decode_errors: int, lock_state: str,
                  reinitialisations: int, consecutive_failures: int, last_result: Any,
@@ -25,7 +30,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
                  input_warning: str = '', cameras: Sequence[tuple[str, int, float, float]] = (),
                  silence_s: float = math.inf, joint_speed: float | None = None,
                  implausible_joint_speed: float | None = None,
-                 implausible_joint_states: int | None = None
+                 implausible_joint_states: int | None = None, plane: str = 'ground'
                  ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
@@ -56,6 +61,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         implausible_joint_states: Joint states with such a speed so far, or None without
             joint input (then the key ``joint states implausible`` is left out, as the
             replay, which has no joint input, leaves it out).
+        plane: ``verification.plane``; shown as ``plane sought``, with what ``any`` turns off.
 
     Returns:
         ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
@@ -78,6 +84,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         ('dropped frames (sync)', dropped_sync),
         ('decode errors', decode_errors),
         ('lock state', lock_state),
+        ('plane sought', PLANE_SOUGHT.get(plane, plane)),
         *_result_values(last_result, joint_speed, implausible_joint_speed),
         *([('joint states implausible', implausible_joint_states)]
           if implausible_joint_states is not None else []),

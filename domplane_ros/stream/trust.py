@@ -21,6 +21,14 @@ re-plugged) even if the new score still passes the absolute threshold. Every
 ``challenge_period`` locked frames a *challenger*, the best plane of the coarse photometric
 alignment (:class:`~domplane_ros.core.coarse.CoarseAligner`), is refined and verified; if it
 explains clearly more of the image than the lock, the lock is replaced.
+
+With ``verification.plane: any`` the plane need not be the ground (a board, a wall): the
+disparity-slope, bottom and beyond checks are off (so swapped cameras are not detected: they
+cannot be told from one such plane), distinct planes are told over the whole image, not its
+bottom, and a search's winner is judged beside its period siblings (:meth:`TrustGate.siblings`,
+the plane moved by its texture's repeats): on a checkerboard a look-alike some squares off
+wins only if it explains clearly more than they do. A winner must also be one plane
+(:data:`MAX_RESIDUAL_FLOW_PX`), not a fit through the far field of a room.
 """
 
 from __future__ import annotations
@@ -31,10 +39,13 @@ import math
 import statistics
 from typing import Any, Callable, Generator, Sequence
 
+import cv2
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
+from domplane_ros.core.flatness import residual_flow_px
+from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import (PlaneVerification, swap_evidence,
+from domplane_ros.core.verification import (agreement_maps, PlaneVerification, swap_evidence,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
 import numpy as np
@@ -73,6 +84,20 @@ MAX_BELOW_FRACTION = 0.03
 # floor, 0.6 and 0.8 px from the truth over it, were measured 8-20 px apart where they
 # extrapolate beyond it.
 DISTINCT_PX = 8.0
+# The first row (share of the height) of that grid for the ground: the lowest 40 %.
+GROUND_ROWS = 0.6
+# A plane's period siblings (TrustGate.siblings) are refined photometrically from the plane
+# moved by a repeat of its texture, with the samples' residual flow up to this many working
+# pixels (the repeat under perspective is not one translation; the first photometric
+# refinement of a coarse plane takes the same, stream/candidates.py PHOTOMETRIC_FIRST_NEAR_PX).
+SIBLING_NEAR_PX = 8.0
+# With verification.plane any, a search's winner must lie on one plane: the median residual
+# flow over its supporting pixels (core/flatness.py), after its photometric refinement, at
+# most this many pixels. Measured on the rendered boards' tuning seeds (sim/boards.py): the
+# published true boards 0.02-0.04 px (12 seeds), the planes through the room behind a board
+# that a search published 0.41-1.14 px (seeds 10, 15, 29). The tuning run with it: 17 of 30
+# published, 17 correct, 0 wrong (before it: 18, 17 and 1).
+MAX_RESIDUAL_FLOW_PX = 0.3
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -143,8 +168,9 @@ class TrustGate:
         self._locked_frames = 0
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
-        self._coarse_planes: dict[bool | str, np.ndarray] = {}
+        self._coarse_planes: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
+        self._flow: cv2.DISOpticalFlow | None = None
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
         """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
@@ -218,6 +244,8 @@ class TrustGate:
 
         """
         check = self._verify(left, right, homography, roi)
+        if self.settings.plane == 'any':
+            return self._judge_any(check, locked)
         height, width = left.shape
         swap = swap_evidence(homography, width, height)
         slope = swap.disparity_slope
@@ -250,6 +278,23 @@ class TrustGate:
                            f'{100 * check.below_fraction:.0f} % of the textured image lies '
                            f'beyond the plane (> {100 * MAX_BELOW_FRACTION:.0f} %); a plane '
                            'through obstacles above the floor?', ground=False)
+        return self._held(check, locked)
+
+    def _judge_any(self, check: PlaneVerification, locked: bool) -> Verdict:
+        """Return the verdict of ``verification.plane: any``: no ground or swap checks.
+
+        The plane need not be the ground, so neither the sign of its disparity slope nor
+        what it explains at the image bottom nor what lies beyond it says anything; the
+        verification and the lock's history still do.
+        """
+        if not check.accepted:
+            return Verdict(False, check, f'plane not verified: {check.reason} (score '
+                           f'{check.score:.2f} < verification.min_score '
+                           f'{self.settings.min_score:g})')
+        return self._held(check, locked)
+
+    def _held(self, check: PlaneVerification, locked: bool) -> Verdict:
+        """Return the verdict on a verified plane: a locked one must keep its score."""
         lock = self.lock_score
         if locked and lock is not None and check.score < self.settings.drop_ratio * lock:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
@@ -309,6 +354,46 @@ class TrustGate:
         """
         return self._coarse.refine(left, right, homography, near_px, finish)
 
+    def siblings(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                 roi: Sequence[float] | None = None) -> list[np.ndarray]:
+        """Return the plane's period siblings: the plane moved by its texture's repeats.
+
+        On a periodic texture a look-alike some periods off explains much of the pattern; the
+        true plane is then among its siblings (and explains more: the pattern's border, the
+        rest of it). The repeats are :func:`~domplane_ros.core.periodic.period_vectors` of
+        the left image over the plane's support (at the verification's working width); each
+        of ``+-p1``, ``+-p2``, ``+-(p1 + p2)``, ``+-(p1 - p2)`` moves the plane in the right
+        image and is refined photometrically (:meth:`refined`, :data:`SIBLING_NEAR_PX`).
+        Unverified: the caller judges them. Cached for the pair of :meth:`begin_pair`.
+
+        Returns:
+            (3, 3) float64 homographies (none when the texture does not repeat).
+
+        """
+        key = ('siblings', np.asarray(homography, np.float64).tobytes())
+        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
+        cached = self._coarse_planes.get(key) if same else None
+        if cached is not None:
+            return list(cached)
+        config = self.config(left.shape[1])
+        maps = agreement_maps(left, right, homography, config, roi)
+        scale = left.shape[1] / maps.left.shape[1]
+        vectors = scale * period_vectors(maps.left, maps.support)
+        shifts = list(vectors)
+        if len(vectors) == 2:
+            shifts += [vectors[0] + vectors[1], vectors[0] - vectors[1]]
+        out = []
+        for shift in shifts:
+            for sign in (1.0, -1.0):
+                dx, dy = sign * shift
+                moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ homography
+                refined = self._coarse.refine(left, right, moved, SIBLING_NEAR_PX)
+                if refined is not None:
+                    out.append(refined)
+        if same:
+            self._coarse_planes[key] = np.array(out).reshape(-1, 3, 3)
+        return out
+
     def challenge_due(self) -> bool:
         """Return whether the lock is challenged in this frame."""
         period = self.settings.challenge_period
@@ -357,11 +442,16 @@ class TrustGate:
             judged += [(None, rival, self.judge(left, right, rival, roi))
                        for rival in rival_planes or []]
             best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
+            # With plane any, distinct over the whole image (a board need not be at the bottom).
+            where = {'rows': 0.0} if self.settings.plane == 'any' else {}
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                            if _rival(v, h, best_h, width, height)]
+                            if _rival(v, h, best_h, width, height, **where)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
             if verdict.uniqueness >= CHALLENGE_MARGIN:
+                several = self._several_planes(left, right, best_h, roi)
+                if several:
+                    return None, None, several
                 return best, verdict, ''
             kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
             return None, None, (f'ambiguous: a {kind} explains the image almost as well '
@@ -375,6 +465,41 @@ class TrustGate:
             return None, None, ''
         closest = max(reasons, key=lambda v: v.score)
         return None, None, closest.reason
+
+    def _several_planes(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                        roi: Sequence[float] | None) -> str:
+        """Return why a winner of ``verification.plane: any`` is no one plane ('' if it is).
+
+        A plane fitted through surfaces at several depths (the far field of a room) passes
+        the verification's working scale; its supporting pixels are then about a pixel off it
+        and off its photometric refinement (:meth:`refined`) alike
+        (:func:`~domplane_ros.core.flatness.residual_flow_px` of the refinement). The ground
+        checks refuse such planes in ``ground`` mode, so this runs in ``any`` mode only. Once
+        per plane and pair.
+        """
+        if self.settings.plane != 'any':
+            return ''
+        key = ('flow', np.asarray(homography, np.float64).tobytes())
+        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
+        residual = self._coarse_planes.get(key) if same else None
+        if residual is None:
+            if self._flow is None:
+                self._flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
+            maps = agreement_maps(left, right, homography, self.config(left.shape[1]), roi)
+            # A search's candidates are refined only once picked: the plane's photometric
+            # refinement is measured, so that a true plane a few tenths of a pixel off (not
+            # yet finished) is not refused; a fit through several surfaces stays one.
+            refined = self._coarse.refine(left, right, homography)
+            residual = np.array(residual_flow_px(
+                left, right, homography if refined is None else refined, maps.support,
+                self._flow))
+            if same:
+                self._coarse_planes[key] = residual
+        if float(residual) <= MAX_RESIDUAL_FLOW_PX:
+            return ''
+        return (f'not one plane: its supporting pixels are {float(residual):.2f} px off it '
+                f'(median residual flow > {MAX_RESIDUAL_FLOW_PX:g}); surfaces at several '
+                'depths, such as the room behind a small board?')
 
     def polish(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                roi: Sequence[float] | None = None) -> np.ndarray:
@@ -416,7 +541,7 @@ class TrustGate:
 
 
 def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,
-           height: int) -> bool:
+           height: int, rows: float = GROUND_ROWS) -> bool:
     """Return whether a judged plane competes with the best for uniqueness.
 
     A plane of swapped cameras always does (the other hypothesis about the head, however
@@ -424,12 +549,19 @@ def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: in
     9 px off it, within 8 px of each other at the image bottom); a plane of this head only
     when distinct; walls and planes through obstacles never.
     """
-    return verdict.ground and (verdict.swapped or _distinct(homography, best, width, height))
+    return verdict.ground and (verdict.swapped
+                               or _distinct(homography, best, width, height, rows))
 
 
-def _distinct(first: np.ndarray, second: np.ndarray, width: int, height: int) -> bool:
-    """Return whether two planes map the bottom of the image > DISTINCT_PX apart (median)."""
-    xs, ys = np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(0.6 * (height - 1),
+def _distinct(first: np.ndarray, second: np.ndarray, width: int, height: int,
+              rows: float = GROUND_ROWS) -> bool:
+    """Return whether two planes map the image > DISTINCT_PX apart (median).
+
+    Over a 5 x 5 grid from row ``rows * (height - 1)`` to the bottom: the ground's rows
+    (:data:`GROUND_ROWS`), or the whole image (0) for ``verification.plane: any``, where the
+    plane may be anywhere.
+    """
+    xs, ys = np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(rows * (height - 1),
                                                                    height - 1, 5))
     points = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)]).T
     a, b = first @ points, second @ points

@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 
 import cv2
-from domplane_ros.config import one_shot_search, PlaneNodeConfig
+from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
 from domplane_ros.core.homography import apply_homography, fit_homography
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools import evaluate
@@ -155,15 +155,26 @@ def test_orb_magsac_without_features_fails_as_a_value():
 
 
 @pytest.mark.xfail(strict=True, reason='chessboard target missed (docs/METHOD.md, '
-                   'Chessboards): the search finds the boards (0.7-1.7 px on 11 of 13 pairs) '
-                   'but the gate refuses the true board planes themselves (disparity '
-                   'shrinking down the image: judged swapped on 8 of 13 pairs, 01 and 02 '
-                   'here; no ground on 1; score 0.12-0.21 < verification.min_score on 3); '
-                   'a gate relaxed to let boards through published a wrong plane, 72 px off')
+                   'Chessboards): with verification.plane any (no ground or swap checks) the '
+                   'boards are no longer refused as swapped or no ground, but each explains '
+                   '0.12-0.21 of the textured image (< verification.min_score 0.25), so 12 '
+                   'of 13 are refused, 01 and 02 here (0.17, 0.12); 03 (published at 1.44 px '
+                   'before the one-plane check) is refused by it (median residual flow 1.38 '
+                   'px > 0.3: the lens distortion the renderer lacks); 0 published, 0 wrong; '
+                   'neither threshold was set on the boards')
 def test_product_on_chessboards_meets_the_board_target():
-    cases = datasets.evaluate_chessboards(OPENCV, repeats=1)
-    assert [c.pair for c in cases] == ['01', '02']
-    assert all(c.figures['ours']['error_px'] < datasets.CHESSBOARD_TARGET_PX for c in cases)
+    # The product alone, as evaluate_chessboards runs it (its cold start; ORB is no target).
+    config = one_shot_search(PlaneNodeConfig(
+        prior=datasets.CHESSBOARD_PRIOR,
+        verification=VerificationSettings(plane=datasets.CHESSBOARD_PLANE)))
+    for number in ('01', '02'):
+        left = references.read_gray(OPENCV / f'left{number}.jpg')
+        right = references.read_gray(OPENCV / f'right{number}.jpg')
+        src, dst = references.chessboard_corners(left, right)
+        result = PlanePipeline(config).process(left, right, 0)
+        assert result.ok, result.reason
+        assert references.mean_transfer_px(result.homography, src, dst) < \
+            datasets.CHESSBOARD_TARGET_PX
 
 
 def test_markdown_table_marks_failures_and_missing_values():

@@ -1,0 +1,46 @@
+"""Period vectors: the repeats of a checkerboard found, none on a texture that does not repeat."""
+
+from __future__ import annotations
+
+import cv2
+from domplane_ros.core.periodic import period_vectors
+import numpy as np
+import pytest
+
+
+def _checker(square: int, angle_deg: float, size: int = 160) -> np.ndarray:
+    ys, xs = np.mgrid[0:size, 0:size].astype(np.float64)
+    a = np.radians(angle_deg)
+    u = (np.cos(a) * xs + np.sin(a) * ys) / square
+    v = (-np.sin(a) * xs + np.cos(a) * ys) / square
+    board = ((np.floor(u) + np.floor(v)) % 2) * 200 + 30
+    return cv2.GaussianBlur(board.astype(np.float32), (0, 0), 0.7)
+
+
+@pytest.mark.parametrize('square, angle_deg', [(6, 0.0), (8, 20.0), (10, -35.0)])
+def test_checkerboard_repeats_along_its_diagonals(square, angle_deg):
+    image = _checker(square, angle_deg)
+    mask = np.zeros(image.shape, bool)
+    mask[20:140, 30:150] = True
+    vectors = period_vectors(image, mask)
+    assert vectors.shape == (2, 2)
+    a = np.radians(angle_deg)
+    # A checkerboard repeats one square along both board axes at once (black to black): its
+    # repeats are the lattice spanned by the two diagonals.
+    basis = square * np.array([[np.cos(a) - np.sin(a), np.sin(a) + np.cos(a)],
+                               [np.cos(a) + np.sin(a), np.sin(a) - np.cos(a)]]).T
+    for vector in vectors:
+        steps = np.linalg.solve(basis, vector)
+        assert np.abs(steps).sum() <= 2  # the shortest repeats, not far multiples
+        assert np.linalg.norm(basis @ np.round(steps) - vector) < 1.5, (vector, basis)
+    cross = vectors[0, 0] * vectors[1, 1] - vectors[0, 1] * vectors[1, 0]
+    assert abs(cross) > 0.5 * square ** 2  # two directions, not one twice
+
+
+def test_blobby_texture_and_empty_mask_have_no_period():
+    rng = np.random.default_rng(3)
+    noise = cv2.GaussianBlur(rng.standard_normal((160, 160)).astype(np.float32), (0, 0), 2.0)
+    assert period_vectors(noise, np.ones(noise.shape, bool)).shape == (0, 2)
+    assert period_vectors(noise, np.zeros(noise.shape, bool)).shape == (0, 2)
+    with pytest.raises(ValueError, match='mask of its shape'):
+        period_vectors(noise, np.ones((10, 10), bool))
