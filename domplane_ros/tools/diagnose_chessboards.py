@@ -30,9 +30,9 @@ from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import TrustGate, Verdict
 from domplane_ros.tools.common import tool_parser
 from domplane_ros.tools.evaluation.datasets import CHESSBOARD_PRIOR
-from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
-                                                      CHESSBOARD_PATTERN, default_data_dir,
-                                                      mean_transfer_px, OPENCV_DIR, read_gray)
+from domplane_ros.tools.evaluation.references import (CHESSBOARD_PATTERN, chessboards,
+                                                      default_data_dir, mean_transfer_px,
+                                                      OPENCV_DIR)
 import numpy as np
 
 TILE = (320, 240)
@@ -76,14 +76,7 @@ def diagnose(folder: Path) -> tuple[list[str], list[np.ndarray]]:
     """Return one printed line and one picture tile per chessboard pair of ``folder``."""
     config = one_shot_search(PlaneNodeConfig(prior=CHESSBOARD_PRIOR))
     lines, tiles = [], []
-    for number in chessboard_pairs(folder):
-        left = read_gray(folder / f'left{number}.jpg')
-        right = read_gray(folder / f'right{number}.jpg')
-        corners = chessboard_corners(left, right)
-        if corners is None:
-            print(f'pair {number}: board not found in both images, skipped', file=sys.stderr)
-            continue
-        src, dst = corners
+    for number, left, right, src, dst in chessboards(folder, report_skipped=True):
         truth = fit_homography(src, dst)
         gate = TrustGate(config.verification)
         verdict = gate.judge(left, right, truth)

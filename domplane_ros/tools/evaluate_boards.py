@@ -33,9 +33,8 @@ from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
 from domplane_ros.tools.evaluation.datasets import CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX
-from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
-                                                      default_data_dir, mean_transfer_px,
-                                                      OPENCV_DIR, read_gray)
+from domplane_ros.tools.evaluation.references import (chessboards, default_data_dir,
+                                                      mean_transfer_px, OPENCV_DIR)
 
 CORRECT_PX = 1.0
 WRONG_PX = 5.0
@@ -86,13 +85,7 @@ def chessboard_lines(folder: Path, modes: Sequence[str] = MODES,
                      min_score: float | None = None) -> list[str]:
     """Return one line per chessboard pair and mode: the error or why nothing was published."""
     lines = []
-    for number in chessboard_pairs(folder):
-        left = read_gray(folder / f'left{number}.jpg')
-        right = read_gray(folder / f'right{number}.jpg')
-        corners = chessboard_corners(left, right)
-        if corners is None:
-            continue
-        src, dst = corners
+    for number, left, right, src, dst in chessboards(folder):
         fit_homography(src, dst)  # the reference is fitted; a failure raises
         for mode in modes:
             start = time.perf_counter()

@@ -45,10 +45,9 @@ from domplane_ros.tools.common import machine_name, one_core, progress, tool_par
 from domplane_ros.tools.evaluation.datasets import (CHESSBOARD_PRIOR, CHESSBOARD_TARGET_PX,
                                                     KITTI_PRIOR, KITTI_ROI, SOLVED_PX)
 from domplane_ros.tools.evaluation.methods import run_orb_magsac
-from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
-                                                      default_data_dir, KITTI_DIR,
-                                                      kitti_reference, mean_transfer_px,
-                                                      OPENCV_DIR, read_gray)
+from domplane_ros.tools.evaluation.references import (chessboard_pairs, chessboards,
+                                                      default_data_dir, KITTI_DIR, kitti_reference,
+                                                      mean_transfer_px, OPENCV_DIR, read_gray)
 import numpy as np
 
 METHODS = ('points', 'lines', 'both', 'orb_magsac')
@@ -170,14 +169,10 @@ def evaluate_real(data: Path) -> list[LineCase]:
     boards = data / OPENCV_DIR
     if boards.is_dir():
         config = PlaneNodeConfig(prior=CHESSBOARD_PRIOR)
-        for number in progress(chessboard_pairs(boards), 'chessboards'):
-            left = read_gray(boards / f'left{number}.jpg')
-            right = read_gray(boards / f'right{number}.jpg')
-            corners = chessboard_corners(left, right)
-            if corners is None:
-                continue
+        numbers = progress(chessboard_pairs(boards), 'chessboards')
+        for number, left, right, src, dst in chessboards(boards, numbers):
             case = LineCase('chessboards', number, left, solved_px=CHESSBOARD_TARGET_PX)
-            cases.append(run_methods(case, left, right, config, corners[0], corners[1]))
+            cases.append(run_methods(case, left, right, config, src, dst))
     return cases
 
 

@@ -45,8 +45,7 @@ from domplane_ros.sim.generators import random_boxes, random_scene, random_setup
 from domplane_ros.sim.model import BACKGROUNDS
 from domplane_ros.sim.textures import FLOOR_KINDS
 from domplane_ros.tools.common import machine_name, one_core, progress, tool_parser
-from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
-                                                      default_data_dir, KITTI_DIR,
+from domplane_ros.tools.evaluation.references import (chessboards, default_data_dir, KITTI_DIR,
                                                       kitti_reference, OPENCV_DIR, read_gray)
 from domplane_ros.tools.evaluation.tables import markdown_table
 import numpy as np
@@ -204,13 +203,8 @@ def real_hypotheses(data_dir: Path
                       read_gray(kitti / 'right.png'), ref.plane.homography()))
     boards = data_dir / OPENCV_DIR
     if boards.exists():
-        for number in chessboard_pairs(boards):
-            left = read_gray(boards / f'left{number}.jpg')
-            right = read_gray(boards / f'right{number}.jpg')
-            found = chessboard_corners(left, right)
-            if found is None:
-                continue
-            hom = fit_homography(*found)
+        for number, left, right, src, dst in chessboards(boards):
+            hom = fit_homography(src, dst)
             if isinstance(hom, np.ndarray):
                 pairs.append((f'chessboard_{number}', left, right, hom))
     for name, left, right, hom in pairs:

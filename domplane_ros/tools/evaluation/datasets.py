@@ -10,7 +10,6 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 import math
 from pathlib import Path
-import sys
 import time
 from typing import Any, Callable, Sequence
 
@@ -25,10 +24,9 @@ from domplane_ros.sim.truth import floor_points
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import progress
 from domplane_ros.tools.evaluation.methods import MethodRun, ours_run, run_orb_magsac, run_ours
-from domplane_ros.tools.evaluation.references import (chessboard_corners, chessboard_pairs,
-                                                      ENSENSO_STEM, kitti_reference,
-                                                      KittiReference, mean_transfer_px,
-                                                      read_gray)
+from domplane_ros.tools.evaluation.references import (chessboard_pairs, chessboards, ENSENSO_STEM,
+                                                      kitti_reference, KittiReference,
+                                                      mean_transfer_px, read_gray)
 import numpy as np
 
 # KITTI: the rig looks ahead (tilt near 0), f about 721 px, baseline 0.54 m at about 1.65 m,
@@ -166,15 +164,8 @@ def evaluate_chessboards(folder: Path, repeats: int = 3) -> list[Case]:
     config = PlaneNodeConfig(prior=CHESSBOARD_PRIOR,
                              verification=VerificationSettings(plane=CHESSBOARD_PLANE))
     cases = []
-    for number in progress(chessboard_pairs(folder), 'chessboards'):
-        left = read_gray(folder / f'left{number}.jpg')
-        right = read_gray(folder / f'right{number}.jpg')
-        corners = chessboard_corners(left, right)
-        if corners is None:
-            print(f'chessboard pair {number}: board not found in both images, skipped',
-                  file=sys.stderr)
-            continue
-        src, dst = corners
+    numbers = progress(chessboard_pairs(folder), 'chessboards')
+    for number, left, right, src, dst in chessboards(folder, numbers, report_skipped=True):
         reference = fit_homography(src, dst)
         floor = mean_transfer_px(reference if isinstance(reference, np.ndarray) else None,
                                  src, dst)

@@ -9,6 +9,8 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 from pathlib import Path
+import sys
+from typing import Iterable, Iterator
 
 import cv2
 from domplane_ros.core.homography import apply_homography
@@ -199,3 +201,31 @@ def chessboard_pairs(folder: Path) -> list[str]:
     """Return the numbers ``NN`` of the ``leftNN.jpg`` / ``rightNN.jpg`` pairs in a folder."""
     return sorted(p.stem[4:] for p in folder.glob('left[0-9][0-9].jpg')
                   if (folder / f'right{p.stem[4:]}.jpg').exists())
+
+
+def chessboards(folder: Path, numbers: Iterable[str] | None = None,
+                report_skipped: bool = False
+                ) -> Iterator[tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray]]:
+    """Yield ``(number, left, right, src, dst)`` for each pair whose board both images show.
+
+    Args:
+        folder: Folder of ``leftNN.jpg`` / ``rightNN.jpg`` pairs.
+        numbers: The pair numbers to read (default: :func:`chessboard_pairs`), e.g. wrapped
+            in a progress bar.
+        report_skipped: Say on stderr which pairs are skipped (board not found in both).
+
+    Yields:
+        The pair's number, its grey images and the board's (N, 2) corners in each
+        (:func:`chessboard_corners`).
+
+    """
+    for number in chessboard_pairs(folder) if numbers is None else numbers:
+        left = read_gray(folder / f'left{number}.jpg')
+        right = read_gray(folder / f'right{number}.jpg')
+        corners = chessboard_corners(left, right)
+        if corners is None:
+            if report_skipped:
+                print(f'chessboard pair {number}: board not found in both images, skipped',
+                      file=sys.stderr)
+            continue
+        yield number, left, right, corners[0], corners[1]
