@@ -48,7 +48,7 @@ from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
 from domplane_ros.core.residual import (beyond_linear_range, flow_shift, local_fit, LocalFit,
-                                        MIN_GRADIENT_ENERGY)
+                                        MIN_GRADIENT_ENERGY, pixel_noise)
 from domplane_ros.core.scratch import constant
 import numpy as np
 
@@ -66,6 +66,20 @@ _LINEAR_RANGE_PX = 1.0
 # the mask's yet: with it, KITTI's road and the gain-mismatched scenes lose plane
 # (docs/MASK.md round 10).
 _ONE_SIDED = False
+# The decision that knows the one-sided shift's noise (docs/MASK.md round 11): its standard
+# error is the pixel noise over window * sqrt(confidence). A measured shift is an obstacle only
+# where it clears the threshold by _OBSTACLE_SE standard errors; a measured shift at or above
+# the threshold that does not is unknown (or plane, _AMBIGUOUS_PLANE); a small shift is plane
+# only where its standard error is below _PLANE_MAX_SE of the threshold.
+_NOISE_AWARE = True
+_OBSTACLE_SE = 2.0
+_PLANE_MAX_SE = math.inf
+_AMBIGUOUS_PLANE = False
+_UNSURE_UNDECIDABLE = False
+_UNSURE_NOT_CLOSED = False
+_PRIOR_SPREAD_PX = math.inf
+_PRIOR_FARTHER_ONLY = False
+_BEYOND_TEST = True
 # Zero-shift NCC below which a textured window is off the plane without a measured parallax.
 _REJECT_NCC = 0.5
 # Where an obstacle of the minimum height would not show, an obstacle needs this many times
@@ -76,6 +90,8 @@ _FAR_FACTOR = 3.0
 # its column, is unknown, not plane (chosen on the tuning scenes, docs/MASK.md round 4).
 _RISE_SHARE = 0.4
 _RISE_ROWS = 8
+# With the noise-aware decision the rise must also be this many standard errors of the shift.
+_RISE_SE = 0.0
 # An unknown region is filled as plane when at least this share of its outline inside the
 # right image is plane, and that outline has at least this many pixels.
 _FILL_OUTLINE_SHARE = 0.95
@@ -326,12 +342,17 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     fit = local_fit(left, warped, int(config.window_px), coarse, _ONE_SIDED)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
     beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
-                                 float(config.ncc_threshold), _LINEAR_RANGE_PX)
-    labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
-                                            beyond)
+                                 float(config.ncc_threshold), _LINEAR_RANGE_PX) \
+        if _BEYOND_TEST else None
+    error = _shift_error(fit, valid, px_per_working, int(config.window_px)) \
+        if _NOISE_AWARE and fit.energy is not None else None
+    labels, parallax, decidable, closable = _classify(fit, valid, shift_inf, px_per_working,
+                                                      config, beyond, error)
     rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
-    _clean(labels, valid, decidable, int(config.morph_px))
+    if error is not None and _RISE_SE > 0.0:
+        rising &= fit.shift >= error * np.float32(_RISE_SE / px_per_working)
+    _clean(labels, valid, closable, int(config.morph_px))
     _unknown_below_obstacles(labels, rising)
     hidden = occlusion_shadow(left, warped, labels == OBSTACLE, halves)
     _set_where(labels, UNKNOWN, hidden)
@@ -399,8 +420,8 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
 
 
 def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
-              px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None,
+              error: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the working-scale labels, the parallax image and the decidable pixels.
 
     Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
@@ -421,6 +442,31 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     # kappa * shift_inf is the parallax an obstacle of the minimum height would show.
     decidable = shift_inf >= threshold / height_factor(float(config.min_obstacle_height))
     plane = small & (magnitude < threshold)
+    closable = decidable
+    if error is not None:
+        if _PRIOR_SPREAD_PX < math.inf:
+            band = np.square(error * np.float32(1.0 / _PRIOR_SPREAD_PX))
+            band += np.float32(1.0)
+            band *= np.float32(threshold)
+            if _PRIOR_FARTHER_ONLY:
+                plane |= small & (magnitude < band) & (residual < np.float32(0.0))
+            else:
+                plane = small & (magnitude < band)
+        cleared = cv2.scaleAdd(error, -float(_OBSTACLE_SE), magnitude) >= threshold
+        unsure = small & ~plane & ~cleared  # at or above the threshold, within the noise
+        if _PLANE_MAX_SE < math.inf:
+            too_noisy = plane & (error >= np.float32(_PLANE_MAX_SE * threshold))
+            plane &= ~too_noisy
+        else:
+            too_noisy = None
+        if _AMBIGUOUS_PLANE:
+            plane |= unsure
+        if _UNSURE_NOT_CLOSED:
+            closable = decidable & ~unsure
+        if _UNSURE_UNDECIDABLE:
+            decidable = decidable & ~unsure
+            if too_noisy is not None:
+                decidable &= ~too_noisy
     labels = (plane & decidable).view(np.uint8) * np.uint8(PLANE)
     # Off the plane: a measured parallax at or above the threshold, or a clear zero-shift
     # mismatch. An obstacle is nearer than infinity by the threshold and below the horizon;
@@ -428,6 +474,8 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     # (the coarse flow is not trusted near the threshold there) counts. A point farther than
     # the plane but nearer than infinity (a hole in the ground) is an obstacle too.
     off = (magnitude >= threshold) | (fit.ncc < _REJECT_NCC)
+    if error is not None:
+        off &= ~unsure
     off &= measurable & ~plane & (shift_inf > 0)
     off &= decidable | (residual >= _FAR_FACTOR * threshold)
     residual += shift_inf
@@ -436,7 +484,22 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     if fit.energy is not None:  # no texture along the epipolar direction: not measured
         measurable &= fit.energy >= np.float32(MIN_GRADIENT_ENERGY)
     _set_where(magnitude, NOT_MEASURED, ~measurable)
-    return labels, magnitude, decidable
+    return labels, magnitude, decidable, closable
+
+
+def _shift_error(fit: LocalFit, valid: np.ndarray, px_per_working: float, window: int
+                 ) -> np.ndarray:
+    """Return the (h, w) float32 standard error of a one-sided shift, full-resolution pixels.
+
+    The pixel noise of the image difference (:func:`~domplane_ros.core.residual.pixel_noise`,
+    over the pixels inside the right image) over ``window * sqrt(fit.energy)``; the energy is
+    taken at least :data:`MIN_GRADIENT_ENERGY` (below it no shift was measured).
+    """
+    assert fit.energy is not None
+    noise = pixel_noise(fit, valid)
+    error = np.sqrt(np.maximum(fit.energy, np.float32(MIN_GRADIENT_ENERGY)))
+    np.divide(np.float32(noise * px_per_working / window), error, out=error)
+    return error
 
 
 def _copy_where(source: np.ndarray, where: np.ndarray, target: np.ndarray) -> None:
