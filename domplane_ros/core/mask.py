@@ -33,6 +33,12 @@ interior of a tile, are filled as plane, and so are those whose outline is mostl
 obstacle face carries its edges' parallax. The residual parallax itself is returned beside the
 labels. Rows wholly above the horizon (less a margin) are unknown without being measured:
 no pixel there could be plane or obstacle, and the labels equal those of measuring them.
+
+Behind the switch ``_NOISE_AWARE`` (off: it costs 1.25 times the mask's time, docs/MASK.md
+round 11) the small shift is the one-sided one, true to scale, and it is judged knowing its
+standard error (the pixel noise over ``window sqrt(confidence)``): plane where the residual
+it most probably comes from is below the threshold and the error is small enough to tell,
+obstacle only where it clears the threshold by two standard errors, unknown between.
 """
 
 from __future__ import annotations
@@ -48,7 +54,7 @@ from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
 from domplane_ros.core.residual import (beyond_linear_range, flow_shift, local_fit, LocalFit,
-                                        MIN_GRADIENT_ENERGY, pixel_noise)
+                                        MIN_GRADIENT_ENERGY)
 from domplane_ros.core.scratch import constant
 import numpy as np
 
@@ -62,24 +68,22 @@ DEFAULT_FOCAL_PX = (400.0, 900.0)
 
 # The one-step estimate is linear in the shift up to about a pixel at the working scale.
 _LINEAR_RANGE_PX = 1.0
-# The one-sided estimate reads the shift true to scale (residual.local_fit's one_sided); not
-# the mask's yet: with it, KITTI's road and the gain-mismatched scenes lose plane
-# (docs/MASK.md round 10).
-_ONE_SIDED = False
-# The decision that knows the one-sided shift's noise (docs/MASK.md round 11): its standard
-# error is the pixel noise over window * sqrt(confidence). A measured shift is an obstacle only
-# where it clears the threshold by _OBSTACLE_SE standard errors; a measured shift at or above
-# the threshold that does not is unknown (or plane, _AMBIGUOUS_PLANE); a small shift is plane
-# only where its standard error is below _PLANE_MAX_SE of the threshold.
-_NOISE_AWARE = True
+# The shift and the decision (docs/MASK.md round 11): the one-sided shift, true to scale
+# (residual.local_fit's one_sided), judged knowing its noise. Its standard error ``se`` is the
+# pixel noise over window * sqrt(confidence). With both off, round 10's mask: the one-step
+# shift against the threshold alone.
+_NOISE_AWARE = False
+# A measured shift is an obstacle only where it clears the threshold by this many standard
+# errors; one at or above the threshold that does not is unknown (the clean-up and the fill
+# may still close it into the plane around it).
 _OBSTACLE_SE = 2.0
-_PLANE_MAX_SE = math.inf
-_AMBIGUOUS_PLANE = False
-_UNSURE_UNDECIDABLE = False
-_UNSURE_NOT_CLOSED = False
-_PRIOR_SPREAD_PX = math.inf
-_PRIOR_FARTHER_ONLY = False
-_BEYOND_TEST = True
+# A measured shift is plane where the residual parallax it most probably comes from is below
+# the threshold, under a normal prior of this spread (full-resolution pixels) on the ground:
+# |r| < threshold * (1 + (se / spread)^2), the posterior mean below the threshold.
+_PRIOR_SPREAD_PX = 1.0
+# ... and only where its standard error is below this share of the threshold: a noisier
+# window cannot tell the ground from an obstacle at the threshold (unknown).
+_PLANE_MAX_SE = 1.3
 # Zero-shift NCC below which a textured window is off the plane without a measured parallax.
 _REJECT_NCC = 0.5
 # Where an obstacle of the minimum height would not show, an obstacle needs this many times
@@ -87,11 +91,11 @@ _REJECT_NCC = 0.5
 _FAR_FACTOR = 3.0
 # The bottom of an obstacle: a pixel measured within the threshold but nearer than the plane
 # by at least this share of it, with an obstacle at most _RISE_ROWS working pixels above it in
-# its column, is unknown, not plane (chosen on the tuning scenes, docs/MASK.md round 4).
+# its column, is unknown, not plane (chosen on the tuning scenes, docs/MASK.md round 4; with
+# the noise-aware decision on the shift true to scale, 0.7 of it: round 11).
 _RISE_SHARE = 0.4
+_TRUE_SCALE_RISE_SHARE = 0.7
 _RISE_ROWS = 8
-# With the noise-aware decision the rise must also be this many standard errors of the shift.
-_RISE_SE = 0.0
 # An unknown region is filled as plane when at least this share of its outline inside the
 # right image is plane, and that outline has at least this many pixels.
 _FILL_OUTLINE_SHARE = 0.95
@@ -339,20 +343,17 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
 
     """
     flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
-    fit = local_fit(left, warped, int(config.window_px), coarse, _ONE_SIDED)
+    fit = local_fit(left, warped, int(config.window_px), coarse, _NOISE_AWARE, valid)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
     beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
-                                 float(config.ncc_threshold), _LINEAR_RANGE_PX) \
-        if _BEYOND_TEST else None
-    error = _shift_error(fit, valid, px_per_working, int(config.window_px)) \
-        if _NOISE_AWARE and fit.energy is not None else None
-    labels, parallax, decidable, closable = _classify(fit, valid, shift_inf, px_per_working,
-                                                      config, beyond, error)
-    rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
+                                 float(config.ncc_threshold), _LINEAR_RANGE_PX)
+    noise = fit.noise if _NOISE_AWARE else None
+    labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
+                                            beyond, noise)
+    share = _TRUE_SCALE_RISE_SHARE if _NOISE_AWARE else _RISE_SHARE
+    rise_px = share * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
-    if error is not None and _RISE_SE > 0.0:
-        rising &= fit.shift >= error * np.float32(_RISE_SE / px_per_working)
-    _clean(labels, valid, closable, int(config.morph_px))
+    _clean(labels, valid, decidable, int(config.morph_px))
     _unknown_below_obstacles(labels, rising)
     hidden = occlusion_shadow(left, warped, labels == OBSTACLE, halves)
     _set_where(labels, UNKNOWN, hidden)
@@ -421,13 +422,15 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
 
 def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
               px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None,
-              error: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              noise: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the working-scale labels, the parallax image and the decidable pixels.
 
     Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
     at least ``config.parallax_threshold_px`` of residual parallax. ``beyond`` ((h, w) bool,
-    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose one-step
-    shift is not trusted.
+    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose small shift
+    is not trusted. ``noise`` (grey levels, :func:`~domplane_ros.core.residual.pixel_noise`)
+    with a one-sided fit: the small shifts are judged by :func:`_judge` knowing their
+    standard error; None: against the threshold alone.
     """
     threshold = float(config.parallax_threshold_px)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
@@ -441,40 +444,20 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     magnitude = np.abs(residual)
     # kappa * shift_inf is the parallax an obstacle of the minimum height would show.
     decidable = shift_inf >= threshold / height_factor(float(config.min_obstacle_height))
-    plane = small & (magnitude < threshold)
-    closable = decidable
-    if error is not None:
-        if _PRIOR_SPREAD_PX < math.inf:
-            band = np.square(error * np.float32(1.0 / _PRIOR_SPREAD_PX))
-            band += np.float32(1.0)
-            band *= np.float32(threshold)
-            if _PRIOR_FARTHER_ONLY:
-                plane |= small & (magnitude < band) & (residual < np.float32(0.0))
-            else:
-                plane = small & (magnitude < band)
-        cleared = cv2.scaleAdd(error, -float(_OBSTACLE_SE), magnitude) >= threshold
-        unsure = small & ~plane & ~cleared  # at or above the threshold, within the noise
-        if _PLANE_MAX_SE < math.inf:
-            too_noisy = plane & (error >= np.float32(_PLANE_MAX_SE * threshold))
-            plane &= ~too_noisy
-        else:
-            too_noisy = None
-        if _AMBIGUOUS_PLANE:
-            plane |= unsure
-        if _UNSURE_NOT_CLOSED:
-            closable = decidable & ~unsure
-        if _UNSURE_UNDECIDABLE:
-            decidable = decidable & ~unsure
-            if too_noisy is not None:
-                decidable &= ~too_noisy
+    if noise is not None and fit.energy is not None:
+        plane, unsure = _judge(magnitude, fit.energy, small,
+                               noise * px_per_working / float(config.window_px), threshold)
+    else:
+        plane, unsure = small & (magnitude < threshold), None
     labels = (plane & decidable).view(np.uint8) * np.uint8(PLANE)
-    # Off the plane: a measured parallax at or above the threshold, or a clear zero-shift
-    # mismatch. An obstacle is nearer than infinity by the threshold and below the horizon;
-    # where an obstacle of the minimum height would not show, only a clearly larger parallax
-    # (the coarse flow is not trusted near the threshold there) counts. A point farther than
-    # the plane but nearer than infinity (a hole in the ground) is an obstacle too.
+    # Off the plane: a measured parallax at or above the threshold (beyond the noise), or a
+    # clear zero-shift mismatch. An obstacle is nearer than infinity by the threshold and
+    # below the horizon; where an obstacle of the minimum height would not show, only a
+    # clearly larger parallax (the coarse flow is not trusted near the threshold there)
+    # counts. A point farther than the plane but nearer than infinity (a hole in the ground)
+    # is an obstacle too.
     off = (magnitude >= threshold) | (fit.ncc < _REJECT_NCC)
-    if error is not None:
+    if unsure is not None:
         off &= ~unsure
     off &= measurable & ~plane & (shift_inf > 0)
     off &= decidable | (residual >= _FAR_FACTOR * threshold)
@@ -484,22 +467,46 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     if fit.energy is not None:  # no texture along the epipolar direction: not measured
         measurable &= fit.energy >= np.float32(MIN_GRADIENT_ENERGY)
     _set_where(magnitude, NOT_MEASURED, ~measurable)
-    return labels, magnitude, decidable, closable
+    return labels, magnitude, decidable
 
 
-def _shift_error(fit: LocalFit, valid: np.ndarray, px_per_working: float, window: int
-                 ) -> np.ndarray:
-    """Return the (h, w) float32 standard error of a one-sided shift, full-resolution pixels.
+def _judge(magnitude: np.ndarray, energy: np.ndarray, small: np.ndarray, error_scale: float,
+           threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (h, w) bool plane and unsure pixels among the small measured shifts.
 
-    The pixel noise of the image difference (:func:`~domplane_ros.core.residual.pixel_noise`,
-    over the pixels inside the right image) over ``window * sqrt(fit.energy)``; the energy is
-    taken at least :data:`MIN_GRADIENT_ENERGY` (below it no shift was measured).
+    The shift's standard error is ``se = error_scale / sqrt(energy)`` (full-resolution
+    pixels; ``error_scale`` the pixel noise over the window side, in full-resolution pixels,
+    the energy taken at least :data:`MIN_GRADIENT_ENERGY`). Plane: ``|r| < threshold
+    (1 + (se / spread)^2)`` (:data:`_PRIOR_SPREAD_PX`) and ``se`` below
+    :data:`_PLANE_MAX_SE` of the threshold. Unsure: not plane and ``|r| - k se`` below the
+    threshold (:data:`_OBSTACLE_SE`): not an obstacle either. Compared without square roots
+    or divisions: with ``d = |r| - threshold``, plane is ``d energy < threshold
+    error_scale^2 / spread^2``, cleared ``d >= 0`` and ``d^2 energy >= k^2 error_scale^2``.
+
+    Args:
+        magnitude: (h, w) float32 |residual parallax|, full-resolution pixels.
+        energy: (h, w) float32 confidence of the one-sided shifts (:class:`LocalFit`).
+        small: (h, w) bool pixels whose small shift was measured.
+        error_scale: Pixel noise over the window side, in full-resolution pixels.
+        threshold: The parallax threshold, full-resolution pixels.
+
+    Returns:
+        (h, w) bool plane and (h, w) bool unsure pixels.
+
     """
-    assert fit.energy is not None
-    noise = pixel_noise(fit, valid)
-    error = np.sqrt(np.maximum(fit.energy, np.float32(MIN_GRADIENT_ENERGY)))
-    np.divide(np.float32(noise * px_per_working / window), error, out=error)
-    return error
+    scale_sq = np.float32(error_scale * error_scale)
+    confident = cv2.max(energy, float(MIN_GRADIENT_ENERGY))
+    excess = cv2.subtract(magnitude, threshold)
+    weighted = cv2.multiply(excess, confident)
+    plane = weighted < np.float32(threshold * scale_sq / _PRIOR_SPREAD_PX ** 2)
+    # se < m threshold  <=>  energy > (error_scale / (m threshold))^2
+    plane &= confident > np.float32(scale_sq / (_PLANE_MAX_SE * threshold) ** 2)
+    plane &= small
+    cleared = cv2.multiply(weighted, excess, dst=weighted) >= np.float32(
+        _OBSTACLE_SE ** 2 * scale_sq)
+    cleared &= excess >= np.float32(0.0)
+    unsure = small & ~plane & ~cleared
+    return plane, unsure
 
 
 def _copy_where(source: np.ndarray, where: np.ndarray, target: np.ndarray) -> None:

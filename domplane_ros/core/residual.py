@@ -53,10 +53,10 @@ class LocalFit:
             ``one_sided``): the window variance of the image difference along the epipolar
             direction it was read on (grey levels^2 per pixel^2; below
             :data:`MIN_GRADIENT_ENERGY` no shift was measured); None for the one-step shift.
-        zero_residual: (ceil(h/4), ceil(w/4)) float32 of a one-sided fit: the difference
-            ``warped - gain left`` less its window mean at every fourth pixel (grey levels),
-            the zero-shift residual the pixel noise is read from (:func:`pixel_noise`);
-            None for the one-step shift.
+        noise: The pixel noise of the image difference ``warped - gain left`` (grey levels,
+            :func:`pixel_noise` over the ``valid`` pixels :func:`local_fit` was given) of a
+            one-sided fit, 0 otherwise: a one-sided shift's standard error is
+            ``noise / (window sqrt(energy))`` working pixels (docs/MASK.md round 11).
     """
 
     shift: np.ndarray
@@ -65,7 +65,7 @@ class LocalFit:
     flow_shift: np.ndarray
     mean: np.ndarray
     energy: np.ndarray | None = None
-    zero_residual: np.ndarray | None = None
+    noise: float = 0.0
 
 
 def _dis_flow() -> cv2.DISOpticalFlow:
@@ -87,7 +87,8 @@ def _dis_flow() -> cv2.DISOpticalFlow:
 
 
 def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
-              coarse: np.ndarray | None = None, one_sided: bool = False) -> LocalFit:
+              coarse: np.ndarray | None = None, one_sided: bool = False,
+              valid: np.ndarray | None = None) -> LocalFit:
     """Return the one-step 1-D Lucas-Kanade shift and the zero-shift NCC of every window.
 
     With ``g`` the mean x gradient of both images and ``e`` the difference of the two
@@ -105,6 +106,8 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
             global: the mask measures it on the whole images and fits only the rows it
             needs); None to measure it here.
         one_sided: Measure the shift by :func:`_one_sided_shift` (with its confidence).
+        valid: (h, w) bool pixels inside the right image, to read the pixel noise of a
+            one-sided fit on (:func:`pixel_noise`); None: no noise read (0).
 
     Returns:
         The :class:`LocalFit`; its arrays are scratch arrays, valid until the next call.
@@ -126,15 +129,18 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
     norm = cv2.multiply(var_a, var_b, dst=tmp)
     np.maximum(norm, np.float32(1e-6), out=norm)
     ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
-    energy = zero_residual = None
+    energy = None
+    noise = 0.0
     if one_sided:
         shift, energy, zero_residual = _one_sided_shift(left, warped, mean_a, mean_b, size)
+        if valid is not None:
+            noise = pixel_noise(zero_residual, valid)
     else:
         shift = _one_step_shift(left, warped, mean_a, mean_b, size)
     if coarse is None:
         coarse = flow_shift(left, warped)
     return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse,
-                    mean=mean_a, energy=energy, zero_residual=zero_residual)
+                    mean=mean_a, energy=energy, noise=noise)
 
 
 def _one_step_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
@@ -187,8 +193,9 @@ def _one_sided_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
         correlation alone judges such a window), and (h, w) float32 its confidence: the
         window variance of the chosen side's ``d`` (grey levels^2 per pixel^2; the shift's
         noise is the difference's pixel noise over the square root of it and of the
-        window's pixel count). Scratch arrays. Then :class:`LocalFit`'s ``zero_residual``
-        (a fresh array).
+        window's pixel count). Scratch arrays. And the zero-shift residual, the difference
+        ``warped - gain left`` less its window mean at every fourth pixel ((ceil(h/4),
+        ceil(w/4)) float32, a fresh array; :func:`pixel_noise`).
 
     """
     shape = left.shape
@@ -243,21 +250,20 @@ def _one_sided_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
     return shift, back_energy, zero_residual
 
 
-def pixel_noise(fit: LocalFit, valid: np.ndarray) -> float:
-    """Return the pixel noise of the image difference (grey levels) of a one-sided fit.
+def pixel_noise(zero_residual: np.ndarray, valid: np.ndarray) -> float:
+    """Return the pixel noise of the image difference (grey levels) at zero shift.
 
-    The robust spread (1.4826 times the median absolute value) of ``fit.zero_residual`` over
-    the pixels in ``valid`` ((h, w) bool, read at every fourth pixel), corrected for the
-    window mean it has lost: on the plane (most of a view below the horizon) the difference
-    at zero shift is noise, so the median ignores the obstacles. 0 without such pixels.
-    The shift's standard error is this over ``window sqrt(fit.energy)`` (working pixels).
+    The robust spread (1.4826 times the median absolute value) of the zero-shift residual
+    (:func:`_one_sided_shift`, every fourth pixel) over the pixels in ``valid`` ((h, w) bool),
+    corrected for the window mean it has lost: on the plane (most of a view below the
+    horizon) the difference at zero shift is noise, and the median ignores the obstacles.
+    0 without such pixels.
     """
-    if fit.zero_residual is None:
-        return 0.0
-    values = fit.zero_residual[valid[::4, ::4]]
+    values = np.abs(zero_residual[valid[::4, ::4]])
     if values.size == 0:
         return 0.0
-    return _MAD_TO_SIGMA * float(np.median(np.abs(values)))
+    middle = values.size // 2  # the upper median: np.median's sort is six times slower
+    return _MAD_TO_SIGMA * float(np.partition(values, middle)[middle])
 
 
 def _gain(left: np.ndarray, warped: np.ndarray) -> float:
