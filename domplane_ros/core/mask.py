@@ -495,8 +495,9 @@ def _judge(magnitude: np.ndarray, energy: np.ndarray, small: np.ndarray, error_s
 
     """
     scale_sq = np.float32(error_scale * error_scale)
-    confident = cv2.max(energy, float(MIN_GRADIENT_ENERGY))
-    excess = cv2.subtract(magnitude, threshold)
+    # numpy with scalars: OpenCV reads a Python number beside an (n, 1) array as a 4-vector.
+    confident = np.maximum(energy, np.float32(MIN_GRADIENT_ENERGY))
+    excess = magnitude - np.float32(threshold)
     weighted = cv2.multiply(excess, confident)
     plane = weighted < np.float32(threshold * scale_sq / _PRIOR_SPREAD_PX ** 2)
     # se < m threshold  <=>  energy > (error_scale / (m threshold))^2
