@@ -34,7 +34,7 @@ obstacle face carries its edges' parallax. The residual parallax itself is retur
 labels. Rows wholly above the horizon (less a margin) are unknown without being measured:
 no pixel there could be plane or obstacle, and the labels equal those of measuring them.
 
-Behind the switch ``_NOISE_AWARE`` (off: it costs 1.25 times the mask's time, docs/MASK.md
+Behind the switch ``_NOISE_AWARE`` (off: it costs 1.2-1.25 times the mask's time, docs/MASK.md
 round 11) the small shift is the one-sided one, true to scale, and it is judged knowing its
 standard error (the pixel noise over ``window sqrt(confidence)``): plane where the residual
 it most probably comes from is below the threshold and the error is small enough to tell,
