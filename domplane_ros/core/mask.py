@@ -33,6 +33,12 @@ interior of a tile, are filled as plane, and so are those whose outline is mostl
 obstacle face carries its edges' parallax. The residual parallax itself is returned beside the
 labels. Rows wholly above the horizon (less a margin) are unknown without being measured:
 no pixel there could be plane or obstacle, and the labels equal those of measuring them.
+
+Behind the switch ``_NOISE_AWARE`` (off: it costs 1.2-1.25 times the mask's time, docs/MASK.md
+round 11) the small shift is the one-sided one, true to scale, and it is judged knowing its
+standard error (the pixel noise over ``window sqrt(confidence)``): plane where the residual
+it most probably comes from is below the threshold and the error is small enough to tell,
+obstacle only where it clears the threshold by two standard errors, unknown between.
 """
 
 from __future__ import annotations
@@ -62,10 +68,22 @@ DEFAULT_FOCAL_PX = (400.0, 900.0)
 
 # The one-step estimate is linear in the shift up to about a pixel at the working scale.
 _LINEAR_RANGE_PX = 1.0
-# The one-sided estimate reads the shift true to scale (residual.local_fit's one_sided); not
-# the mask's yet: with it, KITTI's road and the gain-mismatched scenes lose plane
-# (docs/MASK.md round 10).
-_ONE_SIDED = False
+# The shift and the decision (docs/MASK.md round 11): the one-sided shift, true to scale
+# (residual.local_fit's one_sided), judged knowing its noise. Its standard error ``se`` is the
+# pixel noise over window * sqrt(confidence). With both off, round 10's mask: the one-step
+# shift against the threshold alone.
+_NOISE_AWARE = False
+# A measured shift is an obstacle only where it clears the threshold by this many standard
+# errors; one at or above the threshold that does not is unknown (the clean-up and the fill
+# may still close it into the plane around it).
+_OBSTACLE_SE = 2.0
+# A measured shift is plane where the residual parallax it most probably comes from is below
+# the threshold, under a normal prior of this spread (full-resolution pixels) on the ground:
+# |r| < threshold * (1 + (se / spread)^2), the posterior mean below the threshold.
+_PRIOR_SPREAD_PX = 1.0
+# ... and only where its standard error is below this share of the threshold: a noisier
+# window cannot tell the ground from an obstacle at the threshold (unknown).
+_PLANE_MAX_SE = 1.3
 # Zero-shift NCC below which a textured window is off the plane without a measured parallax.
 _REJECT_NCC = 0.5
 # Where an obstacle of the minimum height would not show, an obstacle needs this many times
@@ -73,8 +91,10 @@ _REJECT_NCC = 0.5
 _FAR_FACTOR = 3.0
 # The bottom of an obstacle: a pixel measured within the threshold but nearer than the plane
 # by at least this share of it, with an obstacle at most _RISE_ROWS working pixels above it in
-# its column, is unknown, not plane (chosen on the tuning scenes, docs/MASK.md round 4).
+# its column, is unknown, not plane (chosen on the tuning scenes, docs/MASK.md round 4; with
+# the noise-aware decision on the shift true to scale, 0.7 of it: round 11).
 _RISE_SHARE = 0.4
+_TRUE_SCALE_RISE_SHARE = 0.7
 _RISE_ROWS = 8
 # An unknown region is filled as plane when at least this share of its outline inside the
 # right image is plane, and that outline has at least this many pixels.
@@ -323,13 +343,15 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
 
     """
     flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
-    fit = local_fit(left, warped, int(config.window_px), coarse, _ONE_SIDED)
+    fit = local_fit(left, warped, int(config.window_px), coarse, _NOISE_AWARE, valid)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
     beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
                                  float(config.ncc_threshold), _LINEAR_RANGE_PX)
+    noise = fit.noise if _NOISE_AWARE else None
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
-                                            beyond)
-    rise_px = _RISE_SHARE * float(config.parallax_threshold_px) / px_per_working
+                                            beyond, noise)
+    share = _TRUE_SCALE_RISE_SHARE if _NOISE_AWARE else _RISE_SHARE
+    rise_px = share * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
     _clean(labels, valid, decidable, int(config.morph_px))
     _unknown_below_obstacles(labels, rising)
@@ -399,14 +421,16 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
 
 
 def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
-              px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None,
+              noise: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the working-scale labels, the parallax image and the decidable pixels.
 
     Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
     at least ``config.parallax_threshold_px`` of residual parallax. ``beyond`` ((h, w) bool,
-    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose one-step
-    shift is not trusted.
+    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose small shift
+    is not trusted. ``noise`` (grey levels, :func:`~domplane_ros.core.residual.pixel_noise`)
+    with a one-sided fit: the small shifts are judged by :func:`_judge` knowing their
+    standard error; None: against the threshold alone.
     """
     threshold = float(config.parallax_threshold_px)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
@@ -420,14 +444,21 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     magnitude = np.abs(residual)
     # kappa * shift_inf is the parallax an obstacle of the minimum height would show.
     decidable = shift_inf >= threshold / height_factor(float(config.min_obstacle_height))
-    plane = small & (magnitude < threshold)
+    if noise is not None and fit.energy is not None:
+        plane, unsure = _judge(magnitude, fit.energy, small,
+                               noise * px_per_working / float(config.window_px), threshold)
+    else:
+        plane, unsure = small & (magnitude < threshold), None
     labels = (plane & decidable).view(np.uint8) * np.uint8(PLANE)
-    # Off the plane: a measured parallax at or above the threshold, or a clear zero-shift
-    # mismatch. An obstacle is nearer than infinity by the threshold and below the horizon;
-    # where an obstacle of the minimum height would not show, only a clearly larger parallax
-    # (the coarse flow is not trusted near the threshold there) counts. A point farther than
-    # the plane but nearer than infinity (a hole in the ground) is an obstacle too.
+    # Off the plane: a measured parallax at or above the threshold (beyond the noise), or a
+    # clear zero-shift mismatch. An obstacle is nearer than infinity by the threshold and
+    # below the horizon; where an obstacle of the minimum height would not show, only a
+    # clearly larger parallax (the coarse flow is not trusted near the threshold there)
+    # counts. A point farther than the plane but nearer than infinity (a hole in the ground)
+    # is an obstacle too.
     off = (magnitude >= threshold) | (fit.ncc < _REJECT_NCC)
+    if unsure is not None:
+        off &= ~unsure
     off &= measurable & ~plane & (shift_inf > 0)
     off &= decidable | (residual >= _FAR_FACTOR * threshold)
     residual += shift_inf
@@ -437,6 +468,46 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
         measurable &= fit.energy >= np.float32(MIN_GRADIENT_ENERGY)
     _set_where(magnitude, NOT_MEASURED, ~measurable)
     return labels, magnitude, decidable
+
+
+def _judge(magnitude: np.ndarray, energy: np.ndarray, small: np.ndarray, error_scale: float,
+           threshold: float) -> tuple[np.ndarray, np.ndarray]:
+    """Return the (h, w) bool plane and unsure pixels among the small measured shifts.
+
+    The shift's standard error is ``se = error_scale / sqrt(energy)`` (full-resolution
+    pixels; ``error_scale`` the pixel noise over the window side, in full-resolution pixels,
+    the energy taken at least :data:`MIN_GRADIENT_ENERGY`). Plane: ``|r| < threshold
+    (1 + (se / spread)^2)`` (:data:`_PRIOR_SPREAD_PX`) and ``se`` below
+    :data:`_PLANE_MAX_SE` of the threshold. Unsure: not plane and ``|r| - k se`` below the
+    threshold (:data:`_OBSTACLE_SE`): not an obstacle either. Compared without square roots
+    or divisions: with ``d = |r| - threshold``, plane is ``d energy < threshold
+    error_scale^2 / spread^2``, cleared ``d >= 0`` and ``d^2 energy >= k^2 error_scale^2``.
+
+    Args:
+        magnitude: (h, w) float32 |residual parallax|, full-resolution pixels.
+        energy: (h, w) float32 confidence of the one-sided shifts (:class:`LocalFit`).
+        small: (h, w) bool pixels whose small shift was measured.
+        error_scale: Pixel noise over the window side, in full-resolution pixels.
+        threshold: The parallax threshold, full-resolution pixels.
+
+    Returns:
+        (h, w) bool plane and (h, w) bool unsure pixels.
+
+    """
+    scale_sq = np.float32(error_scale * error_scale)
+    # numpy with scalars: OpenCV reads a Python number beside an (n, 1) array as a 4-vector.
+    confident = np.maximum(energy, np.float32(MIN_GRADIENT_ENERGY))
+    excess = magnitude - np.float32(threshold)
+    weighted = cv2.multiply(excess, confident)
+    plane = weighted < np.float32(threshold * scale_sq / _PRIOR_SPREAD_PX ** 2)
+    # se < m threshold  <=>  energy > (error_scale / (m threshold))^2
+    plane &= confident > np.float32(scale_sq / (_PLANE_MAX_SE * threshold) ** 2)
+    plane &= small
+    cleared = cv2.multiply(weighted, excess, dst=weighted) >= np.float32(
+        _OBSTACLE_SE ** 2 * scale_sq)
+    cleared &= excess >= np.float32(0.0)
+    unsure = small & ~plane & ~cleared
+    return plane, unsure
 
 
 def _copy_where(source: np.ndarray, where: np.ndarray, target: np.ndarray) -> None:

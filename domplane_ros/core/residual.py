@@ -25,6 +25,9 @@ _REGULARISER = 2.0
 # Confidence a window's one-sided shift needs to be measured: the window variance of the image
 # difference along the epipolar direction, grey levels^2 per pixel^2 (docs/MASK.md round 10).
 MIN_GRADIENT_ENERGY = 2.0
+# A normal's standard deviation over its median absolute value, with the window mean's share
+# of a 5 x 5 window's noise put back (sqrt(25 / 24)).
+_MAD_TO_SIGMA = 1.4826 * 1.0206
 # DIS settings over the ultrafast preset (see _dis_flow).
 _DIS_FINEST_SCALE = 1
 _DIS_PATCH_STRIDE = 8
@@ -50,6 +53,10 @@ class LocalFit:
             ``one_sided``): the window variance of the image difference along the epipolar
             direction it was read on (grey levels^2 per pixel^2; below
             :data:`MIN_GRADIENT_ENERGY` no shift was measured); None for the one-step shift.
+        noise: The pixel noise of the image difference ``warped - gain left`` (grey levels,
+            :func:`pixel_noise` over the ``valid`` pixels :func:`local_fit` was given) of a
+            one-sided fit, 0 otherwise: a one-sided shift's standard error is
+            ``noise / (window sqrt(energy))`` working pixels (docs/MASK.md round 11).
     """
 
     shift: np.ndarray
@@ -58,6 +65,7 @@ class LocalFit:
     flow_shift: np.ndarray
     mean: np.ndarray
     energy: np.ndarray | None = None
+    noise: float = 0.0
 
 
 def _dis_flow() -> cv2.DISOpticalFlow:
@@ -79,7 +87,8 @@ def _dis_flow() -> cv2.DISOpticalFlow:
 
 
 def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
-              coarse: np.ndarray | None = None, one_sided: bool = False) -> LocalFit:
+              coarse: np.ndarray | None = None, one_sided: bool = False,
+              valid: np.ndarray | None = None) -> LocalFit:
     """Return the one-step 1-D Lucas-Kanade shift and the zero-shift NCC of every window.
 
     With ``g`` the mean x gradient of both images and ``e`` the difference of the two
@@ -97,6 +106,8 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
             global: the mask measures it on the whole images and fits only the rows it
             needs); None to measure it here.
         one_sided: Measure the shift by :func:`_one_sided_shift` (with its confidence).
+        valid: (h, w) bool pixels inside the right image, to read the pixel noise of a
+            one-sided fit on (:func:`pixel_noise`); None: no noise read (0).
 
     Returns:
         The :class:`LocalFit`; its arrays are scratch arrays, valid until the next call.
@@ -119,14 +130,17 @@ def local_fit(left: np.ndarray, warped: np.ndarray, window: int,
     np.maximum(norm, np.float32(1e-6), out=norm)
     ncc = cv2.divide(cov, cv2.sqrt(norm, dst=norm), dst=cov)
     energy = None
+    noise = 0.0
     if one_sided:
-        shift, energy = _one_sided_shift(left, warped, mean_a, mean_b, size)
+        shift, energy, zero_residual = _one_sided_shift(left, warped, mean_a, mean_b, size)
+        if valid is not None:
+            noise = pixel_noise(zero_residual, valid)
     else:
         shift = _one_step_shift(left, warped, mean_a, mean_b, size)
     if coarse is None:
         coarse = flow_shift(left, warped)
     return LocalFit(shift=shift, ncc=ncc, variance=var_a, flow_shift=coarse,
-                    mean=mean_a, energy=energy)
+                    mean=mean_a, energy=energy, noise=noise)
 
 
 def _one_step_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
@@ -150,7 +164,7 @@ def _one_step_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
 
 def _one_sided_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
                      mean_b: np.ndarray, size: tuple[int, int]
-                     ) -> tuple[np.ndarray, np.ndarray]:
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the window's residual parallax under linear interpolation, and its confidence.
 
     A shift ``u`` of the warped image between whole pixels is what linear interpolation
@@ -179,19 +193,22 @@ def _one_sided_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
         correlation alone judges such a window), and (h, w) float32 its confidence: the
         window variance of the chosen side's ``d`` (grey levels^2 per pixel^2; the shift's
         noise is the difference's pixel noise over the square root of it and of the
-        window's pixel count). Scratch arrays.
+        window's pixel count). Scratch arrays. And the zero-shift residual, the difference
+        ``warped - gain left`` less its window mean at every fourth pixel ((ceil(h/4),
+        ceil(w/4)) float32, a fresh array; :func:`pixel_noise`).
 
     """
     shape = left.shape
     if shape[1] < 2:  # no difference along x: nothing measured
         nothing = np.zeros(shape, np.float32)
-        return nothing, nothing.copy()
+        return nothing, nothing.copy(), np.zeros(((shape[0] + 3) // 4, 1), np.float32)
     f32 = cv2.CV_32F
     tmp = scratch('tmp', shape)
     gain = _gain(left, warped)
     diff = cv2.addWeighted(warped, 1.0, left, -gain, 0.0, dst=scratch('diff', shape), dtype=f32)
     mean_diff = cv2.addWeighted(mean_b, 1.0, mean_a, -gain, 0.0,
                                 dst=scratch('mean_diff', shape))
+    zero_residual = diff[::4, ::4] - mean_diff[::4, ::4]
     step = scratch('step', shape)  # d(x) = warped(x + 1) - warped(x); 0 in the last column
     cv2.subtract(warped[:, 1:], warped[:, :-1], dst=step[:, :-1], dtype=f32)
     step[:, -1] = 0.0
@@ -230,7 +247,23 @@ def _one_sided_shift(left: np.ndarray, warped: np.ndarray, mean_a: np.ndarray,
     # Too little texture along the epipolar direction: no shift measured (zero; the
     # zero-shift correlation alone judges the window).
     cv2.copyTo(zero, (back_energy < np.float32(MIN_GRADIENT_ENERGY)).view(np.uint8), shift)
-    return shift, back_energy
+    return shift, back_energy, zero_residual
+
+
+def pixel_noise(zero_residual: np.ndarray, valid: np.ndarray) -> float:
+    """Return the pixel noise of the image difference (grey levels) at zero shift.
+
+    The robust spread (1.4826 times the median absolute value) of the zero-shift residual
+    (:func:`_one_sided_shift`, every fourth pixel) over the pixels in ``valid`` ((h, w) bool),
+    corrected for the window mean it has lost: on the plane (most of a view below the
+    horizon) the difference at zero shift is noise, and the median ignores the obstacles.
+    0 without such pixels.
+    """
+    values = np.abs(zero_residual[valid[::4, ::4]])
+    if values.size == 0:
+        return 0.0
+    middle = values.size // 2  # the upper median: np.median's sort is six times slower
+    return _MAD_TO_SIGMA * float(np.partition(values, middle)[middle])
 
 
 def _gain(left: np.ndarray, warped: np.ndarray) -> float:

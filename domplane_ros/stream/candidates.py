@@ -136,7 +136,7 @@ class CandidateWork:
         final, again = self.tightened(step, problem, final, again)
         final, again = self.photometric(step, problem, final, again)
         return (replace(final, candidates_tried=best.candidates_tried),
-                replace(again, uniqueness=verdict.uniqueness))
+                replace(again, uniqueness=verdict.uniqueness, contested=verdict.contested))
 
     def tightened(self, step: PairStep, problem: TwoStep, estimate: PlaneEstimate,
                   verdict: Verdict) -> tuple[PlaneEstimate, Verdict]:

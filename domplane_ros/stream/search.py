@@ -209,13 +209,16 @@ class PlaneSearch:
         """Return whether the search should try the coarse alignment's further shifts.
 
         Once per search: where its last pair found no verified plane, or a plane whose
-        uniqueness is below :data:`DOUBT_UNIQUENESS`.
+        uniqueness is below :data:`DOUBT_UNIQUENESS` or was never contested (no distinct plane
+        of this head judged beside it, only the swapped rivals: its uniqueness was not tested;
+        tuning rough rig 159 published a tiled floor's look-alike 176 px off that way, and the
+        further shifts find the truth beside it, within 1.2 x: refused as ambiguous).
         """
         if search.peaks_tried:
             return False
         if verdict is None:
             return len(search.tried) >= limit
-        return verdict.uniqueness < DOUBT_UNIQUENESS
+        return verdict.uniqueness < DOUBT_UNIQUENESS or not verdict.contested
 
     def _sibling_pick(self, step: PairStep, search: _Search, pool: list[PlaneEstimate],
                       best: PlaneEstimate,

@@ -116,6 +116,9 @@ class Verdict:
             (:meth:`TrustGate.pick`); inf when there was none.
         ground: False for a plane refused as no ground plane (a wall, a plane through boxes
             above the floor): it does not compete with ground planes for uniqueness.
+        contested: A distinct plane of this head (not of swapped cameras) was judged beside
+            it (:meth:`TrustGate.pick`): its uniqueness was tested against the search's other
+            planes, not only against the swapped rivals. False outside a pick.
     """
 
     accepted: bool
@@ -124,6 +127,7 @@ class Verdict:
     swapped: bool = False
     uniqueness: float = math.inf
     ground: bool = True
+    contested: bool = False
 
     @property
     def confidence(self) -> float:
@@ -447,7 +451,8 @@ class TrustGate:
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
                             if _rival(v, h, best_h, width, height, **where)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
-            verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
+            verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
+                              contested=any(not swapped for _, swapped in rival_scores))
             if verdict.uniqueness >= CHALLENGE_MARGIN:
                 several = self._several_planes(left, right, best_h, roi)
                 if several:

@@ -142,6 +142,9 @@ def _load_module(path: Path, name: str) -> object:
     if spec is None or spec.loader is None:
         raise ValueError(f'cannot load {path} as a Python module')
     module = importlib.util.module_from_spec(spec)
+    # Registered, as importlib's recipe does: a dataclass with a plain annotation
+    # (``noise: float``) looks its module up while it is executed.
+    sys.modules[name] = module
     try:
         spec.loader.exec_module(module)
     except (OSError, SyntaxError, ImportError) as err:

@@ -7,6 +7,7 @@ Every configuration here is the documented default (no prior built from a scene'
 from __future__ import annotations
 
 from dataclasses import replace
+import math
 from types import SimpleNamespace
 
 from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
@@ -471,6 +472,29 @@ def test_a_search_in_doubt_tries_the_coarse_alignments_further_shifts(monkeypatc
     assert not without.ok and 'no verified plane' in without.reason
 
 
+def test_a_winner_never_contested_sends_the_search_into_doubt(monkeypatch):
+    # A rough rig on large tiles with a wide disparity (tuning seed 159: 272 px at the bottom
+    # row): the prior's candidates and the coarse alignment all converge on one look-alike
+    # 176 px off (score 0.57; the floor 0.53), and the only rival judged is a swapped plane
+    # (0.004): a uniqueness of 140 that nothing tested. In doubt, the coarse alignment's
+    # further shifts find the floor beside it, and the pair is refused as ambiguous.
+    frame = rough_rig(random_scene(159), random_rig_error(np.random.default_rng((159, 77))))
+    result = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
+    assert not result.ok and 'ambiguous' in result.reason, result.reason
+    assert not result.mask.any() and result.confidence == 0.0
+
+    def uncontested_trusted(self, search, verdict, limit):
+        if search.peaks_tried:
+            return False
+        if verdict is None:
+            return len(search.tried) >= limit
+        return verdict.uniqueness < search_module.DOUBT_UNIQUENESS
+
+    monkeypatch.setattr(search_module.PlaneSearch, '_in_doubt', uncontested_trusted)
+    without = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
+    assert without.ok and plane_error_px(frame, without.homography) > 100.0
+
+
 def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch):
     # A rough rig (tuning seed 12) whose best plane converges 1.1 px off the floor and then
     # explains 0.23 of the image, under verification.min_score 0.25 (the floor itself: 0.27):
@@ -529,9 +553,11 @@ def test_a_search_is_in_doubt_once_without_a_verified_plane_or_under_the_uniquen
     search = search_module.PlaneSearch(PlaneNodeConfig, None, None, None, None)
     state = search_module._Search(tried={0, 1})
     doubt = search_module.DOUBT_UNIQUENESS
-    verdict = SimpleNamespace(uniqueness=doubt - 0.01)
+    verdict = SimpleNamespace(uniqueness=doubt - 0.01, contested=True)
     assert search._in_doubt(state, verdict, 2)
-    assert not search._in_doubt(state, SimpleNamespace(uniqueness=doubt), 2)
+    assert not search._in_doubt(state, SimpleNamespace(uniqueness=doubt, contested=True), 2)
+    # A winner no distinct plane of this head was judged beside: its uniqueness is untested.
+    assert search._in_doubt(state, SimpleNamespace(uniqueness=math.inf, contested=False), 2)
     assert search._in_doubt(state, None, 2)  # the search's last pair
     assert not search._in_doubt(state, None, 3)  # more pairs to come
     state.peaks_tried = True
