@@ -45,6 +45,7 @@ from domplane_ros.core.potentials import make_potential, Potential
 from domplane_ros.core.prior import (best_screened, prior_candidates, PriorSearch,
                                      screen_candidates)
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
+from domplane_ros.core.runs import RunRecord, StageEnd, StageState
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -149,6 +150,10 @@ class TwoStep:
                                               np.full(self.n_lines, self.line_weight)])
         self.row_weight = (None if self.n_lines == 0 or self.line_weight == 1.0
                            else self.feature_weight[self.row_feature])
+        # The runs' stage ends by start and settings (:meth:`_estimate_from`), and the
+        # screening energies by candidate set (:meth:`screening_energy`).
+        self._runs: dict[tuple, RunRecord] = {}
+        self._screened: dict[tuple[bytes, float], np.ndarray] = {}
 
     @property
     def n_features(self) -> int:
@@ -219,12 +224,31 @@ class TwoStep:
             the final ``H``, their closest distances and indices, and closest positions.
 
         """
+        return self._iterate(self._stage_start(h, potential, energies), potential, options,
+                             energies)[:4]
+
+    def _stage_start(self, h: np.ndarray, potential: Potential, energies: list[float]
+                     ) -> StageState:
+        """Return the state of a stage before its first round (its energy appended)."""
         pred = self.apply(h)
         r, idx, aux, penalty, terms, closest = self.local_step(pred, potential)
         energy = float(terms.sum())
         energies.append(energy)
+        return StageState(0, h, pred, r, idx, aux, penalty, energy, closest)
+
+    def _iterate(self, state: StageState, potential: Potential, options: EstimatorConfig,
+                 energies: list[float]
+                 ) -> tuple[np.ndarray, int, bool, tuple, StageState | None]:
+        """Iterate a stage on from ``state`` (round ``state.rounds + 1``); append energies.
+
+        Returns :meth:`run_stage`'s tuple and, where the stage stopped only because a round
+        moved the predictions less than ``options.tolerance_px``, its state there (from which
+        a smaller tolerance iterates on exactly as a fresh run would), else None.
+        """
+        h, pred, r, idx, aux = state.h, state.pred, state.r, state.idx, state.aux
+        penalty, energy, closest = state.penalty, state.energy, state.closest
         weights = self.row_weight
-        for it in range(1, options.max_iterations + 1):
+        for it in range(state.rounds + 1, options.max_iterations + 1):
             h_new = self.refiner.refine(h, aux, weights, _GLOBAL_STEP_ITERATIONS,
                                         OVER_RELAXATION)[0]
             pred_new = self.apply(h_new)
@@ -249,16 +273,18 @@ class TwoStep:
             if energy_new > energy * (1.0 + 1e-12):
                 # Both steps lower the energy in exact arithmetic; a near-degenerate fit (a
                 # handful of features) can break that numerically: the step is not taken.
-                return h, it, True, (pred, r, idx, closest)
+                return h, it, True, (pred, r, idx, closest), None
             move = float(np.abs(pred_new - pred).max()) if pred.size else 0.0
             energies.append(energy_new)
             decrease = energy - energy_new
             h, pred, aux, penalty, energy = h_new, pred_new, aux_new, pen_new, energy_new
             r, idx, closest = r_new, idx_new, closest_new
-            if move < options.tolerance_px or decrease <= options.energy_tolerance * max(
-                    energy, 1e-300):
-                return h, it, True, (pred, r, idx, closest)
-        return h, options.max_iterations, False, (pred, r, idx, closest)
+            settled = decrease <= options.energy_tolerance * max(energy, 1e-300)
+            if move < options.tolerance_px or settled:
+                stop = None if settled else StageState(it, h, pred, r, idx, aux, penalty,
+                                                       energy, closest, move)
+                return h, it, True, (pred, r, idx, closest), stop
+        return h, options.max_iterations, False, (pred, r, idx, closest), None
 
     def polish(self, h: np.ndarray, threshold_px: float, matched: tuple
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -401,17 +427,40 @@ class TwoStep:
 
     def _estimate_from(self, h: np.ndarray, options: EstimatorConfig, far: bool
                        ) -> PlaneEstimate | FailedEstimate:
-        """Iterate every stage from the valid start ``h``, refine, and say how it ended."""
+        """Iterate every stage from the valid start ``h``, refine, and say how it ended.
+
+        The stages' ends are kept per start and settings (:class:`RunRecord`): the same start
+        run again with a tolerance no larger (a search's swapped rivals, rechecked at the
+        configured tolerance after the candidates') re-uses the stages that end the same and
+        iterates on from where the earlier run stopped, with the results of a fresh run.
+        """
         energies: list[float] = []
         stages: list[int] = []
         iterations = 0
         converged = False
+        key = RunRecord.key(h, options, far)
+        earlier = self._runs.get(key)
+        if earlier is not None and earlier.tolerance_px < options.tolerance_px:
+            earlier = None  # it iterated past where this run stops
+        record = RunRecord(options.tolerance_px)
         for k, scale in enumerate(gnc_scales(options, far)):
             potential = make_potential(options.potential, options.lambda_weight, scale)
             before = len(energies)
-            h, its, converged, matched = self.run_stage(h, potential, options, energies)
+            end = earlier.stages[k] if earlier is not None else None
+            if end is None:
+                out = self._iterate(self._stage_start(h, potential, energies), potential,
+                                    options, energies)
+            else:
+                energies.extend(end.energies)
+                out = end.result
+                if end.stopped is not None and not end.stopped.move < options.tolerance_px:
+                    out = self._iterate(end.stopped, potential, options, energies)
+                    earlier = None  # the later stages start elsewhere
+            record.stages.append(StageEnd(energies[before:], out))
+            h, its, converged, matched = out[:4]
             stages.extend([k] * (len(energies) - before))
             iterations += its
+        self._runs[key] = record
         trace = np.asarray(energies)
         stage_trace = np.asarray(stages, np.int64)
         reason = check_homography(h)
@@ -458,12 +507,16 @@ class TwoStep:
             threshold_px: Truncation ``t``, pixels.
 
         """
+        key = (np.ascontiguousarray(candidates, np.float64).tobytes(), float(threshold_px))
+        if key in self._screened:  # the same set screened again (a search's rechecked rivals)
+            return self._screened[key].copy()
         costs = np.zeros(candidates.shape[0])
         if self.n_points:
             costs += screen_candidates(candidates, self.left, self.tree, threshold_px)
         if self.n_lines:
             costs += self.line_weight * screen_line_candidates(
                 candidates, self.left_segments, self.matcher, threshold_px)
+        self._screened[key] = costs.copy()
         return costs
 
     def best_screened(self, candidates: np.ndarray, threshold_px: float, count: int
