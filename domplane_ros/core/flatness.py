@@ -160,10 +160,10 @@ def one_plane_residual_px(left: np.ndarray, right: np.ndarray, homography: np.nd
                           support: np.ndarray, flow: cv2.DISOpticalFlow | None = None) -> float:
     """Return how far a plane's supporting pixels are from one plane seen through a lens.
 
-    The lesser of the median residual flow (:func:`residual_flow_px`) and what is left of it
-    after the fit of two radial lenses (:func:`lens_residual_px`), full pixels (arguments as
+    The lesser of the median residual flow (:func:`residual_flow_px`) and the median of what
+    the fit of two radial lenses leaves (:func:`lens_residual_px`), full pixels (arguments as
     :func:`residual_flow_px`; inf without supporting pixels). Measured on rendered boards seen
-    through lenses (``sim/boards.py``, ``lens=True``, tuning seeds): see docs/METHOD.md.
+    through lenses (``sim/boards.py``, ``lens=True``, tuning seeds; docs/METHOD.md).
     """
     residual = residual_flow(left, right, homography, support, flow)
     if not residual.support.any():

@@ -553,8 +553,8 @@ class TrustGate:
             return ''
         return (f'not one plane: its supporting pixels are {float(residual):.2f} px off it '
                 f'(median residual flow, after a fit of radial lenses, > '
-                f'{MAX_RESIDUAL_FLOW_PX:g}); surfaces at several depths, such as the room '
-                'behind a small board?')
+                f'{MAX_RESIDUAL_FLOW_PX:g}); surfaces at several depths, such as the '
+                'room behind a small board?')
 
     def polish(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                roi: Sequence[float] | None = None) -> np.ndarray:
