@@ -442,22 +442,30 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                    time_ms=1000.0 * (time.perf_counter() - start))
 
 
-def region_support(maps: AgreementMaps, close_px: int = REGION_CLOSE_PX
-                   ) -> tuple[float, float]:
-    """Return a plane's score over its own region and that region's share of the image.
+def own_region(maps: AgreementMaps, close_px: int = REGION_CLOSE_PX) -> np.ndarray:
+    """Return the (h, w) bool own region of a plane at the working scale (none if no support).
 
-    The region is the largest 8-connected component of the supporting pixels after a
-    morphological closing with a disc of radius ``close_px`` working pixels; its score is the
-    supporting share of the textured pixels inside it (``PlaneVerification.region_score``).
+    The largest 8-connected component of the supporting pixels after a morphological closing
+    with a disc of radius ``close_px`` working pixels.
     """
     if not maps.support.any():
-        return 0.0, 0.0
+        return np.zeros_like(maps.support)
     disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
     closed = cv2.morphologyEx(maps.support.astype(np.uint8), cv2.MORPH_CLOSE, disc)
     count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
     if count <= 1:
-        return 0.0, 0.0
-    own = labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        return np.zeros_like(maps.support)
+    return labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+
+
+def region_support(maps: AgreementMaps, close_px: int = REGION_CLOSE_PX
+                   ) -> tuple[float, float]:
+    """Return a plane's score over its own region and that region's share of the image.
+
+    The region is :func:`own_region`; its score is the supporting share of the textured
+    pixels inside it (``PlaneVerification.region_score``).
+    """
+    own = own_region(maps, close_px)
     textured = int(np.count_nonzero(maps.textured & own))
     score = int(np.count_nonzero(maps.support & own)) / textured if textured else 0.0
     return float(score), float(np.count_nonzero(own)) / own.size

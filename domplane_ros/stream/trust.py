@@ -45,7 +45,7 @@ from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
 from domplane_ros.core.flatness import one_plane_residual_px
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import (agreement_maps, PlaneVerification,
+from domplane_ros.core.verification import (agreement_maps, own_region, PlaneVerification,
                                             REASON_LOW_SUPPORT, swap_evidence,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
@@ -496,10 +496,14 @@ class TrustGate:
 
         The verified planes are taken by peak score; one that is not one plane
         (:meth:`_several_planes`: a fit through the room behind a small board, which in a
-        textured room explains more of the image than the board) is neither the winner nor
-        a rival, and the next is tried. The first that is one plane is published if it is
-        unique among the distinct planes judged (over the whole image: a board need not be
-        at the bottom) that are one plane too.
+        textured room explains more of the image than the board) is not the winner, and the
+        next is tried. The first that is one plane is published if it is unique (distinct
+        planes over the whole image: a board need not be at the bottom): its score at least
+        :data:`CHALLENGE_MARGIN` times that of every distinct plane judged that is one plane,
+        and its support in its own region (:func:`~domplane_ros.core.verification.own_region`)
+        that many times that of every distinct plane judged there, one plane or not (a
+        board's own plane refused for the lens it is seen through still beats its
+        look-alike some squares off; a fit through the room does not reach into the board).
         """
         height, width = left.shape
         several = ''
@@ -508,16 +512,28 @@ class TrustGate:
             if several:
                 continue
             least = verdict.score / CHALLENGE_MARGIN
-            top = max((v.score for _, h, v in judged
-                       if _rival(v, h, best_h, width, height, rows=0.0)
-                       and (v.score <= least or not self._several_planes(left, right, h, roi))),
+            rivals = [(h, v) for _, h, v in judged
+                      if _rival(v, h, best_h, width, height, rows=0.0)]
+            top = max((v.score for h, v in rivals
+                       if v.score <= least or not self._several_planes(left, right, h, roi)),
                       default=0.0)
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
-            if verdict.uniqueness >= CHALLENGE_MARGIN:
-                return best, verdict, ''
-            return None, None, ('ambiguous: a distinct plane explains the image almost as '
-                                f'well (score {top:.2f} against {verdict.score:.2f} < '
-                                f'{CHALLENGE_MARGIN:g} x; a periodic board?)')
+            if verdict.uniqueness < CHALLENGE_MARGIN:
+                return None, None, ('ambiguous: a distinct plane explains the image almost '
+                                    f'as well (score {top:.2f} against {verdict.score:.2f} < '
+                                    f'{CHALLENGE_MARGIN:g} x; a periodic board?)')
+            config = self.config(width)
+            maps = agreement_maps(left, right, best_h, config, roi)
+            own = own_region(maps)
+            mine = int(np.count_nonzero(maps.support & own))
+            for h, _ in rivals:
+                theirs = int(np.count_nonzero(
+                    agreement_maps(left, right, h, config, roi).support & own))
+                if theirs * CHALLENGE_MARGIN > mine:
+                    return None, None, ('ambiguous: a distinct plane explains its region '
+                                        f'almost as well ({theirs} against {mine} supporting '
+                                        f'pixels < {CHALLENGE_MARGIN:g} x; a periodic board?)')
+            return best, verdict, ''
         return None, None, several
 
     def _several_planes(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,

@@ -142,9 +142,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     print(f'machine: {machine_name()}')
     if rows:
         score = 'default' if args.min_score is None else f'{args.min_score:g}'
-        boards_kind = ', '.join([name for name, on in (('lens', args.lens),
-                                                        ('small', args.small)) if on]
-                                or ['plain'])
+        kinds = [name for name, on in (('lens', args.lens), ('small', args.small)) if on]
+        boards_kind = ', '.join(kinds or ['plain'])
         print(f'seeds {seeds[0]}..{seeds[-1]} ({"held out" if first else "tuning"}); boards: '
               f'{boards_kind}; prior: CHESSBOARD_PRIOR; verification.min_score {score}; '
               'correct < 1 px, wrong > 5 px\n')
