@@ -28,7 +28,11 @@ cannot be told from one such plane), distinct planes are told over the whole ima
 bottom, and a search's winner is judged beside its period siblings (:meth:`TrustGate.siblings`,
 the plane moved by its texture's repeats): on a checkerboard a look-alike some squares off
 wins only if it explains clearly more than they do. A winner must also be one plane
-(:data:`MAX_RESIDUAL_FLOW_PX`), not a fit through the far field of a room.
+(:data:`MAX_RESIDUAL_FLOW_PX`, after a fit of two radial lenses), not a fit through the far
+field of a room; such fits are passed over, not published, and do not compete by their score.
+A plane that explains too little of the image may still be verified by its own region
+(:func:`own_region_verified`: a board covering a fifth of a textured room), and a winner must
+be unique in its own region too, against every distinct plane judged.
 """
 
 from __future__ import annotations
@@ -205,20 +209,21 @@ class TrustGate:
                 self._working = working_pair(left, right, config)
             working = self._working
         else:
-            return verify_plane(left, right, homography, config, roi, working, self._own_region)
+            return verify_plane(left, right, homography, config, roi, working,
+                                **self._own_region)
         # The same plane judged twice on one pair (a search picked again with its rivals
         # refined further, a finished plane that did not move) is verified once.
         key = (np.asarray(homography, np.float64).tobytes(),
                None if roi is None else tuple(roi), config.working_width_px)
         if key not in self._verified:
             self._verified[key] = verify_plane(left, right, homography, config, roi, working,
-                                               self._own_region)
+                                               **self._own_region)
         return self._verified[key]
 
     @property
-    def _own_region(self) -> bool:
-        """Return whether planes are also judged over their own region (plane ``any``)."""
-        return self.settings.plane == 'any'
+    def _own_region(self) -> dict[str, bool]:
+        """Return verify_plane's own-region argument: planes ``any`` are judged there too."""
+        return {'own_region': True} if self.settings.plane == 'any' else {}
 
     def config(self, width: int) -> VerificationConfig:
         """Return the verification settings for images ``width`` pixels wide."""
