@@ -13,8 +13,8 @@ homography of the board's true correspondences), ``--small`` small boards in a t
 
 A published plane is *correct* when its mean transfer error over the visible board is below
 1 px, *wrong* when above 5 px. Precision = correct / published; recall = correct / pairs.
-Tuning seeds start at 0; ``--held-out`` uses seeds from 1000, run once for the report;
-``--first-seed 2000`` a second held-out range.
+Tuning seeds are 0-129 (``--first-seed`` below 1000); ``--held-out`` uses seeds from 1000, run
+once for the report; ``--first-seed 2000`` a second held-out range.
 
 ``--chessboards`` also runs the OpenCV chessboard pairs of ``--data``/opencv_samples (the
 check, not a tuning set): per pair the error against the homography fitted to the board's
@@ -144,9 +144,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         score = 'default' if args.min_score is None else f'{args.min_score:g}'
         kinds = [name for name, on in (('lens', args.lens), ('small', args.small)) if on]
         boards_kind = ', '.join(kinds or ['plain'])
-        print(f'seeds {seeds[0]}..{seeds[-1]} ({"held out" if first else "tuning"}); boards: '
-              f'{boards_kind}; prior: CHESSBOARD_PRIOR; verification.min_score {score}; '
-              'correct < 1 px, wrong > 5 px\n')
+        kind = 'held out' if first >= 1000 else 'tuning'
+        print(f'seeds {seeds[0]}..{seeds[-1]} ({kind}); boards: {boards_kind}; prior: '
+              f'CHESSBOARD_PRIOR; verification.min_score {score}; correct < 1 px, wrong > 5 px'
+              '\n')
         print('| texture | verification.plane | pairs | published | correct | wrong | '
               'precision | recall | worst px |\n' + '|---' * 9 + '|')
         print('\n'.join(rows))
