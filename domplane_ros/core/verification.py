@@ -54,7 +54,7 @@ Nothing here imports ROS; the functions take numpy arrays and return frozen valu
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 import time
 from typing import Any, Sequence
@@ -72,6 +72,9 @@ PEAK_PROBES = ((1.0, 0.0), (-1.0, 0.0))
 
 # The lowest share of the region's rows over which PlaneVerification.bottom_score is measured.
 BOTTOM_BAND = 1.0 / 3.0
+# Gaps between supporting pixels closed to find a plane's own region (region_score), working
+# pixels (8 full pixels at 640 x 480 and the default scale).
+REGION_CLOSE_PX = 2
 
 # Failure reasons, in the order they are checked.
 REASON_NO_OVERLAP = 'plane maps too little of the left image inside the right image'
@@ -160,6 +163,13 @@ class PlaneVerification:
         peak_score: The score with the sideways probes at ``probe_shift_px`` as well
             (:data:`PEAK_PROBES`), at most ``score``: for ranking planes a few pixels apart
             on the same pair.
+        region_score: Measured only when asked (``verify_plane(..., own_region=True)``, for
+            ``verification.plane: any``), else 0: the score over the plane's own region, the
+            largest connected region of its supporting pixels once gaps of up to
+            :data:`REGION_CLOSE_PX` working pixels are closed: the supporting share of the
+            textured pixels there, [0, 1]. A board covering a fifth of a textured room
+            explains little of the image but almost all of its own region.
+        region_fraction: That region's share of the image, [0, 1] (0 unless measured).
         below_fraction: Share of the textured region pixels that the plane does not explain
             but the plane moved right in the right image (``PROBES[0]``) does, clearly better
             than the plane and the plane moved left, [0, 1]. For a correctly ordered head
@@ -180,6 +190,8 @@ class PlaneVerification:
     bottom_score: float = 0.0
     peak_score: float = 0.0
     below_fraction: float = 0.0
+    region_score: float = 0.0
+    region_fraction: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -385,7 +397,8 @@ def _check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
 def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                  config: VerificationConfig = VerificationConfig(),
                  roi: Sequence[float] | None = None,
-                 working: WorkingPair | None = None) -> PlaneVerification:
+                 working: WorkingPair | None = None, own_region: bool = False
+                 ) -> PlaneVerification:
     """Verify a left-to-right plane homography by dense photometric agreement.
 
     See the module docstring for the method and the meaning of the score and confidence.
@@ -399,6 +412,8 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
             (as ``features.roi``); default the whole image.
         working: These images at the working width (:func:`working_pair`), if already
             made; the result is the same.
+        own_region: Also measure the score over the plane's own region
+            (``PlaneVerification.region_score`` and ``region_fraction``).
 
     Returns:
         The :class:`PlaneVerification`; a failed check is a value with ``accepted`` False and
@@ -419,7 +434,41 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
         raise ValueError(f'working images made for {working.full_shape} at width '
                          f'{working.width}, not {left.shape} at {config.working_width_px}')
     maps = _maps(left, right, hom, config, region, working)
-    return _verdict(maps, config, start, region)
+    verdict = _verdict(maps, config, start, region)
+    if not own_region:
+        return verdict
+    score, fraction = region_support(maps)
+    return replace(verdict, region_score=score, region_fraction=fraction,
+                   time_ms=1000.0 * (time.perf_counter() - start))
+
+
+def own_region(maps: AgreementMaps, close_px: int = REGION_CLOSE_PX) -> np.ndarray:
+    """Return the (h, w) bool own region of a plane at the working scale (none if no support).
+
+    The largest 8-connected component of the supporting pixels after a morphological closing
+    with a disc of radius ``close_px`` working pixels.
+    """
+    if not maps.support.any():
+        return np.zeros_like(maps.support)
+    disc = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * close_px + 1, 2 * close_px + 1))
+    closed = cv2.morphologyEx(maps.support.astype(np.uint8), cv2.MORPH_CLOSE, disc)
+    count, labels, stats, _ = cv2.connectedComponentsWithStats(closed, connectivity=8)
+    if count <= 1:
+        return np.zeros_like(maps.support)
+    return labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+
+
+def region_support(maps: AgreementMaps, close_px: int = REGION_CLOSE_PX
+                   ) -> tuple[float, float]:
+    """Return a plane's score over its own region and that region's share of the image.
+
+    The region is :func:`own_region`; its score is the supporting share of the textured
+    pixels inside it (``PlaneVerification.region_score``).
+    """
+    own = own_region(maps, close_px)
+    textured = int(np.count_nonzero(maps.textured & own))
+    score = int(np.count_nonzero(maps.support & own)) / textured if textured else 0.0
+    return float(score), float(np.count_nonzero(own)) / own.size
 
 
 def _bottom_score(maps: AgreementMaps, region: tuple[float, float, float, float]) -> float:

@@ -28,7 +28,11 @@ cannot be told from one such plane), distinct planes are told over the whole ima
 bottom, and a search's winner is judged beside its period siblings (:meth:`TrustGate.siblings`,
 the plane moved by its texture's repeats): on a checkerboard a look-alike some squares off
 wins only if it explains clearly more than they do. A winner must also be one plane
-(:data:`MAX_RESIDUAL_FLOW_PX`), not a fit through the far field of a room.
+(:data:`MAX_RESIDUAL_FLOW_PX`, after a fit of two radial lenses), not a fit through the far
+field of a room; such fits are passed over, not published, and do not compete by their score.
+A plane that explains too little of the image may still be verified by its own region
+(:func:`own_region_verified`: a board covering a fifth of a textured room), and a winner must
+be unique in its own region too, against every distinct plane judged.
 """
 
 from __future__ import annotations
@@ -42,10 +46,11 @@ from typing import Any, Callable, Generator, Sequence
 import cv2
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
-from domplane_ros.core.flatness import residual_flow_px
+from domplane_ros.core.flatness import one_plane_residual_px
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import (agreement_maps, PlaneVerification, swap_evidence,
+from domplane_ros.core.verification import (agreement_maps, own_region, PlaneVerification,
+                                            REASON_LOW_SUPPORT, swap_evidence,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
 import numpy as np
@@ -98,6 +103,13 @@ SIBLING_NEAR_PX = 8.0
 # that a search published 0.41-1.14 px (seeds 10, 15, 29). The tuning run with it: 17 of 30
 # published, 17 correct, 0 wrong (before it: 18, 17 and 1).
 MAX_RESIDUAL_FLOW_PX = 0.3
+# With verification.plane any, a plane that explains too little of the image is still
+# verified when it explains at least MIN_REGION_SCORE of the texture of its own region
+# (PlaneVerification.region_score) and that region covers at least MIN_REGION_FRACTION of the
+# image: a board covering a fifth of a textured room. Chosen on the rendered boards' tuning
+# seeds (sim/boards.py, small and lens, 0-129; docs/METHOD.md).
+MIN_REGION_SCORE = 0.8
+MIN_REGION_FRACTION = 0.1
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -201,14 +213,21 @@ class TrustGate:
                 self._working = working_pair(left, right, config)
             working = self._working
         else:
-            return verify_plane(left, right, homography, config, roi, working)
+            return verify_plane(left, right, homography, config, roi, working,
+                                **self._own_region)
         # The same plane judged twice on one pair (a search picked again with its rivals
         # refined further, a finished plane that did not move) is verified once.
         key = (np.asarray(homography, np.float64).tobytes(),
                None if roi is None else tuple(roi), config.working_width_px)
         if key not in self._verified:
-            self._verified[key] = verify_plane(left, right, homography, config, roi, working)
+            self._verified[key] = verify_plane(left, right, homography, config, roi, working,
+                                               **self._own_region)
         return self._verified[key]
+
+    @property
+    def _own_region(self) -> dict[str, bool]:
+        """Return verify_plane's own-region argument: planes ``any`` are judged there too."""
+        return {'own_region': True} if self.settings.plane == 'any' else {}
 
     def config(self, width: int) -> VerificationConfig:
         """Return the verification settings for images ``width`` pixels wide."""
@@ -291,10 +310,19 @@ class TrustGate:
         what it explains at the image bottom nor what lies beyond it says anything; the
         verification and the lock's history still do.
         """
+        if not check.accepted and own_region_verified(check):
+            # A board covering a fifth of a textured room: little of the image's texture, but
+            # nearly all of its own region's.
+            confidence = 0.5 + 0.5 * (check.region_score - MIN_REGION_SCORE) / (
+                1.0 - MIN_REGION_SCORE)
+            check = replace(check, accepted=True, reason='',
+                            confidence=float(np.clip(confidence, 0.5, 1.0)))
         if not check.accepted:
             return Verdict(False, check, f'plane not verified: {check.reason} (score '
                            f'{check.score:.2f} < verification.min_score '
-                           f'{self.settings.min_score:g})')
+                           f'{self.settings.min_score:g}; its own region '
+                           f'{100 * check.region_fraction:.0f} % of the image, score '
+                           f'{check.region_score:.2f})')
         return self._held(check, locked)
 
     def _held(self, check: PlaneVerification, locked: bool) -> Verdict:
@@ -445,18 +473,16 @@ class TrustGate:
             rival_planes = rivals() if callable(rivals) else rivals
             judged += [(None, rival, self.judge(left, right, rival, roi))
                        for rival in rival_planes or []]
+            if self.settings.plane == 'any':
+                return self._pick_any(left, right, judged, verified, roi)
             best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
-            # With plane any, distinct over the whole image (a board need not be at the bottom).
-            where = {'rows': 0.0} if self.settings.plane == 'any' else {}
+            where: dict[str, float] = {}
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
                             if _rival(v, h, best_h, width, height, **where)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
                               contested=any(not swapped for _, swapped in rival_scores))
             if verdict.uniqueness >= CHALLENGE_MARGIN:
-                several = self._several_planes(left, right, best_h, roi)
-                if several:
-                    return None, None, several
                 return best, verdict, ''
             kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
             return None, None, (f'ambiguous: a {kind} explains the image almost as well '
@@ -470,6 +496,55 @@ class TrustGate:
             return None, None, ''
         closest = max(reasons, key=lambda v: v.score)
         return None, None, closest.reason
+
+    def _pick_any(self, left: np.ndarray, right: np.ndarray,
+                  judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],
+                  verified: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],
+                  roi: Sequence[float] | None
+                  ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
+        """Return :meth:`pick`'s answer for ``verification.plane: any``.
+
+        The verified planes are taken by peak score; one that is not one plane
+        (:meth:`_several_planes`: a fit through the room behind a small board, which in a
+        textured room explains more of the image than the board) is not the winner, and the
+        next is tried. The first that is one plane is published if it is unique (distinct
+        planes over the whole image: a board need not be at the bottom): its score at least
+        :data:`CHALLENGE_MARGIN` times that of every distinct plane judged that is one plane,
+        and its support in its own region (:func:`~domplane_ros.core.verification.own_region`)
+        that many times that of every distinct plane judged there, one plane or not (a
+        board's own plane refused for the lens it is seen through still beats its
+        look-alike some squares off; a fit through the room does not reach into the board).
+        """
+        height, width = left.shape
+        several = ''
+        for best, best_h, verdict in sorted(verified, key=lambda item: -item[2].peak_score):
+            several = self._several_planes(left, right, best_h, roi)
+            if several:
+                continue
+            least = verdict.score / CHALLENGE_MARGIN
+            rivals = [(h, v) for _, h, v in judged
+                      if _rival(v, h, best_h, width, height, rows=0.0)]
+            top = max((v.score for h, v in rivals
+                       if v.score <= least or not self._several_planes(left, right, h, roi)),
+                      default=0.0)
+            verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
+            if verdict.uniqueness < CHALLENGE_MARGIN:
+                return None, None, ('ambiguous: a distinct plane explains the image almost '
+                                    f'as well (score {top:.2f} against {verdict.score:.2f} < '
+                                    f'{CHALLENGE_MARGIN:g} x; a periodic board?)')
+            config = self.config(width)
+            maps = agreement_maps(left, right, best_h, config, roi)
+            own = own_region(maps)
+            mine = int(np.count_nonzero(maps.support & own))
+            for h, _ in rivals:
+                theirs = int(np.count_nonzero(
+                    agreement_maps(left, right, h, config, roi).support & own))
+                if theirs * CHALLENGE_MARGIN > mine:
+                    return None, None, ('ambiguous: a distinct plane explains its region '
+                                        f'almost as well ({theirs} against {mine} supporting '
+                                        f'pixels < {CHALLENGE_MARGIN:g} x; a periodic board?)')
+            return best, verdict, ''
+        return None, None, several
 
     def _several_planes(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                         roi: Sequence[float] | None) -> str:
@@ -495,7 +570,7 @@ class TrustGate:
             # refinement is measured, so that a true plane a few tenths of a pixel off (not
             # yet finished) is not refused; a fit through several surfaces stays one.
             refined = self._coarse.refine(left, right, homography)
-            residual = np.array(residual_flow_px(
+            residual = np.array(one_plane_residual_px(
                 left, right, homography if refined is None else refined, maps.support,
                 self._flow))
             if same:
@@ -503,8 +578,9 @@ class TrustGate:
         if float(residual) <= MAX_RESIDUAL_FLOW_PX:
             return ''
         return (f'not one plane: its supporting pixels are {float(residual):.2f} px off it '
-                f'(median residual flow > {MAX_RESIDUAL_FLOW_PX:g}); surfaces at several '
-                'depths, such as the room behind a small board?')
+                f'(median residual flow, after a fit of radial lenses, > '
+                f'{MAX_RESIDUAL_FLOW_PX:g}); surfaces at several depths, such as the '
+                'room behind a small board?')
 
     def polish(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                roi: Sequence[float] | None = None) -> np.ndarray:
@@ -543,6 +619,18 @@ class TrustGate:
         """
         return (challenger.accepted
                 and challenger.peak_score > CHALLENGE_MARGIN * lock.peak_score)
+
+
+def own_region_verified(check: PlaneVerification) -> bool:
+    """Return whether a plane refused for its score is verified over its own region.
+
+    ``verification.plane: any`` only: it explains too little of the image
+    (:data:`~domplane_ros.core.verification.REASON_LOW_SUPPORT`) but at least
+    :data:`MIN_REGION_SCORE` of the texture of its own region, which covers at least
+    :data:`MIN_REGION_FRACTION` of the image.
+    """
+    return (check.reason == REASON_LOW_SUPPORT and check.region_score >= MIN_REGION_SCORE
+            and check.region_fraction >= MIN_REGION_FRACTION)
 
 
 def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,

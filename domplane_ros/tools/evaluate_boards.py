@@ -1,17 +1,20 @@
 """Non-ground dominant planes: wrong planes published, precision and recall per plane mode.
 
-Run ``python -m domplane_ros.tools.evaluate_boards [--pairs 40] [--held-out] [--chessboards]``.
+Run ``python -m domplane_ros.tools.evaluate_boards [--pairs 40] [--held-out] [--chessboards]
+[--lens] [--small]``.
 Rendered boards and walls in front of the head (:func:`~domplane_ros.sim.boards.board_scene`:
 tilted up to 30 degrees both ways, noise, checker and tile textures, clutter behind), one
 pair per seed, a fresh :class:`~domplane_ros.stream.pipeline.PlanePipeline` and the whole
 search in that pair, with ``verification.plane`` ``ground`` (the default) and ``any``. The
 prior is the evaluation's ``CHESSBOARD_PRIOR`` (a plane facing the head: tilt 45-89 degrees,
 rough focal and baseline ranges), the same for every seed, never set from a scene's truth.
+``--lens`` renders the boards through radial lenses (the truth is then the least-squares
+homography of the board's true correspondences), ``--small`` small boards in a textured room.
 
 A published plane is *correct* when its mean transfer error over the visible board is below
 1 px, *wrong* when above 5 px. Precision = correct / published; recall = correct / pairs.
-Tuning seeds start at 0; ``--held-out`` uses seeds from 1000, run once for the report;
-``--first-seed 2000`` a second held-out range.
+Tuning seeds are 0-129 (``--first-seed`` below 1000); ``--held-out`` uses seeds from 1000, run
+once for the report; ``--first-seed 2000`` a second held-out range.
 
 ``--chessboards`` also runs the OpenCV chessboard pairs of ``--data``/opencv_samples (the
 check, not a tuning set): per pair the error against the homography fitted to the board's
@@ -61,11 +64,16 @@ def _row(case: str, mode: str, errors: list[float | None]) -> str:
 
 
 def rendered_rows(seeds: Sequence[int], modes: Sequence[str] = MODES,
-                  min_score: float | None = None) -> list[str]:
-    """Return the table rows of the rendered boards, per texture and mode, and the totals."""
+                  min_score: float | None = None, lens: bool = False,
+                  small: bool = False) -> list[str]:
+    """Return the table rows of the rendered boards, per texture and mode, and the totals.
+
+    ``lens``, ``small``: the boards seen through radial lenses, small boards in a textured
+    room (:func:`~domplane_ros.sim.boards.board_scene`).
+    """
     errors: dict[tuple[str, str], list[float | None]] = {}
     for seed in progress(seeds, 'boards'):
-        frame = board_scene(seed)
+        frame = board_scene(seed, lens=lens, small=small)
         for mode in modes:
             config = board_config(mode, min_score)
             result = PlanePipeline(config).process(frame.left, frame.right, 0)
@@ -117,19 +125,27 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='verification.plane values run')
     parser.add_argument('--min-score', type=float, default=None,
                         help='verification.min_score (default: the parameter default)')
+    parser.add_argument('--lens', action='store_true',
+                        help='the rendered boards seen through radial lenses (k1)')
+    parser.add_argument('--small', action='store_true',
+                        help='small rendered boards (15-40 %% of the image) in a textured room')
     args = parser.parse_args(argv)
     first = 1000 if args.held_out else 0
     if args.first_seed is not None:
         first = args.first_seed
     seeds = list(range(first, first + args.pairs))
     with one_core():
-        rows = rendered_rows(seeds, args.modes, args.min_score) if args.pairs > 0 else []
+        rows = (rendered_rows(seeds, args.modes, args.min_score, args.lens, args.small)
+                if args.pairs > 0 else [])
         boards = (chessboard_lines(args.data / OPENCV_DIR, args.modes, args.min_score)
                   if args.chessboards else [])
     print(f'machine: {machine_name()}')
     if rows:
         score = 'default' if args.min_score is None else f'{args.min_score:g}'
-        print(f'seeds {seeds[0]}..{seeds[-1]} ({"held out" if first else "tuning"}); prior: '
+        kinds = [name for name, on in (('lens', args.lens), ('small', args.small)) if on]
+        boards_kind = ', '.join(kinds or ['plain'])
+        kind = 'held out' if first >= 1000 else 'tuning'
+        print(f'seeds {seeds[0]}..{seeds[-1]} ({kind}); boards: {boards_kind}; prior: '
               f'CHESSBOARD_PRIOR; verification.min_score {score}; correct < 1 px, wrong > 5 px'
               '\n')
         print('| texture | verification.plane | pairs | published | correct | wrong | '

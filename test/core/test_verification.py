@@ -233,3 +233,26 @@ def test_every_homography_the_estimator_accepts_can_be_verified() -> None:
     image = np.random.default_rng(0).integers(0, 255, (120, 160), dtype=np.uint8)
     check = verification.verify_plane(image, image, hom)
     assert not check.accepted and check.reason
+
+
+def test_a_small_board_explains_its_own_region_not_the_textured_room():
+    from domplane_ros.sim.boards import board_scene
+    # A board covering 15 % of a textured room, seen through radial lenses (tuning seed 8).
+    frame = board_scene(8, lens=True, small=True)
+    config = verification.VerificationConfig(working_width_px=160)
+    plain = verification.verify_plane(frame.left, frame.right, frame.homography, config)
+    truth = verification.verify_plane(frame.left, frame.right, frame.homography, config,
+                                      own_region=True)
+    # The image's texture is mostly the room's: the board explains 0.15 of it.
+    assert truth.score < 0.2 and not truth.accepted
+    assert (plain.region_score, plain.region_fraction) == (0.0, 0.0)  # measured on request
+    # Its own region (the board, 15 % of the image) it explains almost entirely.
+    assert truth.region_score > 0.9
+    assert truth.region_fraction == pytest.approx(frame.plane_left.mean(), abs=0.03)
+    assert truth.score == plain.score
+    # The board moved 3 and 8 px: a patch of the board, or nothing.
+    for dx in (3.0, 8.0):
+        moved = verification.verify_plane(frame.left, frame.right,
+                                          _translate(dx, 0.0) @ frame.homography, config,
+                                          own_region=True)
+        assert moved.region_score < 0.8 or moved.region_fraction < 0.1
