@@ -21,7 +21,8 @@ from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.challenge import distinct_starts, NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
-from domplane_ros.stream.trust import TrustGate, Verdict
+from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.verdict import Verdict
 import numpy as np
 
 __all__ = ['CANDIDATE_TOLERANCE_PX', 'CandidateWork', 'PHOTOMETRIC', 'PHOTOMETRIC_MIN_PEAK',

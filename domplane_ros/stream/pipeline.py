@@ -30,7 +30,8 @@ from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stag
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import FrameTracker
 from domplane_ros.stream.search import PlaneSearch, propagate
-from domplane_ros.stream.trust import TrustGate, Verdict
+from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.verdict import Verdict
 import numpy as np
 
 __all__ = ['FrameResult', 'LOCKED', 'PipelineStats', 'PlanePipeline', 'SEARCHING', 'TRACKING',

@@ -29,7 +29,8 @@ from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.swap import swap_rivals
-from domplane_ros.stream.trust import TrustGate, Verdict
+from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.verdict import Verdict
 import numpy as np
 
 # The swapped rivals stop at the candidates' tolerance (CandidateWork.rival_options); their

@@ -38,7 +38,7 @@ be unique in its own region too, against every distinct plane judged.
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import dataclass, replace
+from dataclasses import replace
 import math
 import statistics
 from typing import Any, Callable, Generator, Sequence
@@ -53,6 +53,7 @@ from domplane_ros.core.verification import (agreement_maps, own_region, PlaneVer
                                             REASON_LOW_SUPPORT, swap_evidence,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
+from domplane_ros.stream.verdict import CHALLENGE_MARGIN, is_rival, Verdict
 import numpy as np
 
 # Least disparity slope (pixels per row, roll-invariant; see swap_evidence) of a ground plane
@@ -61,9 +62,6 @@ import numpy as np
 # equals the least baseline over camera height the check admits (the prior's default
 # minimum is 0.05).
 MIN_GROUND_SLOPE = 0.02
-# A challenger replaces the lock only if its score is this many times the lock's: a plane a
-# fraction of a pixel away scores about the same and must not churn the lock.
-CHALLENGE_MARGIN = 1.2
 # A published plane must explain at least this share of the textured pixels in the lowest
 # third of the region (PlaneVerification.bottom_score): the ground seen from above fills the
 # bottom of the image. Measured on the tuning seeds 30-129 (cold, rough, swapped, faint tiles):
@@ -82,15 +80,6 @@ MIN_BOTTOM_SHARE = 0.25
 # 6-7 px off through the faces of boxes on faint tiled floors (tuning seeds 188, 305) 0.047
 # and 0.052.
 MAX_BELOW_FRACTION = 0.03
-# Two planes are distinct when they map the bottom of the image (a 5 x 5 grid over the lowest
-# 40 % of the rows, where the ground is) more than this many pixels apart (median); closer
-# ones are the same plane refined differently (starts 1.8-11.8 px apart converge to the same
-# plane, stream/challenge.py NEAR_LOCK_PX). The median, not the largest: two fits of the same
-# floor, 0.6 and 0.8 px from the truth over it, were measured 8-20 px apart where they
-# extrapolate beyond it.
-DISTINCT_PX = 8.0
-# The first row (share of the height) of that grid for the ground: the lowest 40 %.
-GROUND_ROWS = 0.6
 # A plane's period siblings (TrustGate.siblings) are refined photometrically from the plane
 # moved by a repeat of its texture, with the samples' residual flow up to this many working
 # pixels (the repeat under perspective is not one translation; the first photometric
@@ -113,57 +102,6 @@ MIN_REGION_FRACTION = 0.1
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
-
-
-@dataclass(frozen=True)
-class Verdict:
-    """The gate's decision on one plane.
-
-    Attributes:
-        accepted: Publish it.
-        verification: The photometric verification (score, confidence, fractions).
-        reason: Empty when accepted, else one line saying why not.
-        swapped: The plane looks like one of swapped left and right cameras.
-        uniqueness: Its score over the best score of a distinct plane judged on the same pair
-            (:meth:`TrustGate.pick`); inf when there was none.
-        ground: False for a plane refused as no ground plane (a wall, a plane through boxes
-            above the floor): it does not compete with ground planes for uniqueness.
-        contested: A distinct plane of this head (not of swapped cameras) was judged beside
-            it (:meth:`TrustGate.pick`): its uniqueness was tested against the search's other
-            planes, not only against the swapped rivals. False outside a pick.
-    """
-
-    accepted: bool
-    verification: PlaneVerification
-    reason: str
-    swapped: bool = False
-    uniqueness: float = math.inf
-    ground: bool = True
-    contested: bool = False
-
-    @property
-    def confidence(self) -> float:
-        """Return the confidence in [0, 1]: 0 for a swapped plane, else the lesser of two.
-
-        The verification's confidence (0.5 at ``verification.min_score``, 1 at 0.1 above
-        it) and the uniqueness's: 0.5 at :data:`CHALLENGE_MARGIN` (the least a search
-        publishes), 0 at a tie with a distinct plane, 1 at twice the margin above 1.
-        """
-        if self.swapped:
-            return 0.0
-        unique = float(np.clip((self.uniqueness - 1.0) / (2.0 * (CHALLENGE_MARGIN - 1.0)),
-                               0.0, 1.0)) if math.isfinite(self.uniqueness) else 1.0
-        return min(self.verification.confidence, unique)
-
-    @property
-    def score(self) -> float:
-        """Return the verification score in [0, 1]."""
-        return self.verification.score
-
-    @property
-    def peak_score(self) -> float:
-        """Return the verification's peak score in [0, 1] (ranks planes a few px apart)."""
-        return self.verification.peak_score
 
 
 class TrustGate:
@@ -476,9 +414,8 @@ class TrustGate:
             if self.settings.plane == 'any':
                 return self._pick_any(left, right, judged, verified, roi)
             best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
-            where: dict[str, float] = {}
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                            if _rival(v, h, best_h, width, height, **where)]
+                            if is_rival(v, h, best_h, width, height)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
                               contested=any(not swapped for _, swapped in rival_scores))
@@ -523,7 +460,7 @@ class TrustGate:
                 continue
             least = verdict.score / CHALLENGE_MARGIN
             rivals = [(h, v) for _, h, v in judged
-                      if _rival(v, h, best_h, width, height, rows=0.0)]
+                      if is_rival(v, h, best_h, width, height, rows=0.0)]
             top = max((v.score for h, v in rivals
                        if v.score <= least or not self._several_planes(left, right, h, roi)),
                       default=0.0)
@@ -631,33 +568,3 @@ def own_region_verified(check: PlaneVerification) -> bool:
     """
     return (check.reason == REASON_LOW_SUPPORT and check.region_score >= MIN_REGION_SCORE
             and check.region_fraction >= MIN_REGION_FRACTION)
-
-
-def _rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,
-           height: int, rows: float = GROUND_ROWS) -> bool:
-    """Return whether a judged plane competes with the best for uniqueness.
-
-    A plane of swapped cameras always does (the other hypothesis about the head, however
-    close it maps: measured, a checker's swapped floor 0.6 px from the truth and a look-alike
-    9 px off it, within 8 px of each other at the image bottom); a plane of this head only
-    when distinct; walls and planes through obstacles never.
-    """
-    return verdict.ground and (verdict.swapped
-                               or _distinct(homography, best, width, height, rows))
-
-
-def _distinct(first: np.ndarray, second: np.ndarray, width: int, height: int,
-              rows: float = GROUND_ROWS) -> bool:
-    """Return whether two planes map the image > DISTINCT_PX apart (median).
-
-    Over a 5 x 5 grid from row ``rows * (height - 1)`` to the bottom: the ground's rows
-    (:data:`GROUND_ROWS`), or the whole image (0) for ``verification.plane: any``, where the
-    plane may be anywhere.
-    """
-    xs, ys = np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(rows * (height - 1),
-                                                                   height - 1, 5))
-    points = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)]).T
-    a, b = first @ points, second @ points
-    with np.errstate(divide='ignore', invalid='ignore'):
-        distance = np.median(np.linalg.norm(a[:2] / a[2] - b[:2] / b[2], axis=0))
-    return not distance <= DISTINCT_PX

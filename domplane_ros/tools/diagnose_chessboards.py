@@ -27,7 +27,8 @@ from domplane_ros.core.homography import fit_homography
 from domplane_ros.core.prior import prior_candidates
 from domplane_ros.core.verification import swap_evidence
 from domplane_ros.stream.pipeline import PlanePipeline
-from domplane_ros.stream.trust import TrustGate, Verdict
+from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.verdict import Verdict
 from domplane_ros.tools.common import tool_parser
 from domplane_ros.tools.evaluation.datasets import CHESSBOARD_PRIOR
 from domplane_ros.tools.evaluation.references import (CHESSBOARD_PATTERN, chessboards,

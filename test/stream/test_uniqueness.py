@@ -20,7 +20,8 @@ from domplane_ros.sim.rigs import plane_error_px, swapped
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
-from domplane_ros.stream.trust import TrustGate, Verdict
+from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.verdict import distinct_planes, Verdict
 import numpy as np
 import pytest
 
@@ -57,8 +58,8 @@ def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
     # The look-alike also sees texture beyond it (below_fraction): that check alone refuses
     # it as well, so it is switched off here to show the rival's part.
     _wrong_without(frame, monkeypatch,
-                   (trust_module, '_rival', lambda verdict, h, best, width, height: (
-                       verdict.ground and trust_module._distinct(h, best, width, height))),
+                   (trust_module, 'is_rival', lambda verdict, h, best, width, height: (
+                       verdict.ground and distinct_planes(h, best, width, height))),
                    (trust_module, 'MAX_BELOW_FRACTION', 1.0))
 
 

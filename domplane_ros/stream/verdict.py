@@ -1,0 +1,109 @@
+"""The gate's decision on one plane, and when two planes compete for uniqueness.
+
+:class:`Verdict` is what :class:`~domplane_ros.stream.trust.TrustGate` says of a plane (publish
+it or why not, its confidence, its uniqueness among the planes judged on the same pair);
+:func:`is_rival` and :func:`distinct_planes` say which judged planes a winner must beat by
+:data:`CHALLENGE_MARGIN`. Nothing here imports ROS.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+import math
+
+from domplane_ros.core.verification import PlaneVerification
+import numpy as np
+
+# A challenger replaces the lock only if its score is this many times the lock's: a plane a
+# fraction of a pixel away scores about the same and must not churn the lock.
+CHALLENGE_MARGIN = 1.2
+# Two planes are distinct when they map the bottom of the image (a 5 x 5 grid over the lowest
+# 40 % of the rows, where the ground is) more than this many pixels apart (median); closer
+# ones are the same plane refined differently (starts 1.8-11.8 px apart converge to the same
+# plane, stream/challenge.py NEAR_LOCK_PX). The median, not the largest: two fits of the same
+# floor, 0.6 and 0.8 px from the truth over it, were measured 8-20 px apart where they
+# extrapolate beyond it.
+DISTINCT_PX = 8.0
+# The first row (share of the height) of that grid for the ground: the lowest 40 %.
+GROUND_ROWS = 0.6
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """The gate's decision on one plane.
+
+    Attributes:
+        accepted: Publish it.
+        verification: The photometric verification (score, confidence, fractions).
+        reason: Empty when accepted, else one line saying why not.
+        swapped: The plane looks like one of swapped left and right cameras.
+        uniqueness: Its score over the best score of a distinct plane judged on the same pair
+            (:meth:`TrustGate.pick`); inf when there was none.
+        ground: False for a plane refused as no ground plane (a wall, a plane through boxes
+            above the floor): it does not compete with ground planes for uniqueness.
+        contested: A distinct plane of this head (not of swapped cameras) was judged beside
+            it (:meth:`TrustGate.pick`): its uniqueness was tested against the search's other
+            planes, not only against the swapped rivals. False outside a pick.
+    """
+
+    accepted: bool
+    verification: PlaneVerification
+    reason: str
+    swapped: bool = False
+    uniqueness: float = math.inf
+    ground: bool = True
+    contested: bool = False
+
+    @property
+    def confidence(self) -> float:
+        """Return the confidence in [0, 1]: 0 for a swapped plane, else the lesser of two.
+
+        The verification's confidence (0.5 at ``verification.min_score``, 1 at 0.1 above
+        it) and the uniqueness's: 0.5 at :data:`CHALLENGE_MARGIN` (the least a search
+        publishes), 0 at a tie with a distinct plane, 1 at twice the margin above 1.
+        """
+        if self.swapped:
+            return 0.0
+        unique = float(np.clip((self.uniqueness - 1.0) / (2.0 * (CHALLENGE_MARGIN - 1.0)),
+                               0.0, 1.0)) if math.isfinite(self.uniqueness) else 1.0
+        return min(self.verification.confidence, unique)
+
+    @property
+    def score(self) -> float:
+        """Return the verification score in [0, 1]."""
+        return self.verification.score
+
+    @property
+    def peak_score(self) -> float:
+        """Return the verification's peak score in [0, 1] (ranks planes a few px apart)."""
+        return self.verification.peak_score
+
+
+def is_rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: int,
+             height: int, rows: float = GROUND_ROWS) -> bool:
+    """Return whether a judged plane competes with the best for uniqueness.
+
+    A plane of swapped cameras always does (the other hypothesis about the head, however
+    close it maps: measured, a checker's swapped floor 0.6 px from the truth and a look-alike
+    9 px off it, within 8 px of each other at the image bottom); a plane of this head only
+    when distinct; walls and planes through obstacles never.
+    """
+    return verdict.ground and (verdict.swapped
+                               or distinct_planes(homography, best, width, height, rows))
+
+
+def distinct_planes(first: np.ndarray, second: np.ndarray, width: int, height: int,
+                    rows: float = GROUND_ROWS) -> bool:
+    """Return whether two planes map the image > DISTINCT_PX apart (median).
+
+    Over a 5 x 5 grid from row ``rows * (height - 1)`` to the bottom: the ground's rows
+    (:data:`GROUND_ROWS`), or the whole image (0) for ``verification.plane: any``, where the
+    plane may be anywhere.
+    """
+    xs, ys = np.meshgrid(np.linspace(0, width - 1, 5), np.linspace(rows * (height - 1),
+                                                                   height - 1, 5))
+    points = np.column_stack([xs.ravel(), ys.ravel(), np.ones(xs.size)]).T
+    a, b = first @ points, second @ points
+    with np.errstate(divide='ignore', invalid='ignore'):
+        distance = np.median(np.linalg.norm(a[:2] / a[2] - b[:2] / b[2], axis=0))
+    return not distance <= DISTINCT_PX
