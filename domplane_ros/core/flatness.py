@@ -101,7 +101,11 @@ def residual_flow_px(left: np.ndarray, right: np.ndarray, homography: np.ndarray
         ValueError: If the images differ in size or are not 2-D.
 
     """
-    residual = residual_flow(left, right, homography, support, flow)
+    return _median_px(residual_flow(left, right, homography, support, flow))
+
+
+def _median_px(residual: ResidualFlow) -> float:
+    """Return the median residual flow length over the support, full pixels (inf if none)."""
     if not residual.support.any():
         return float('inf')
     lengths = np.hypot(residual.flow[..., 0], residual.flow[..., 1])[residual.support]
@@ -173,10 +177,8 @@ def one_plane_residual_px(left: np.ndarray, right: np.ndarray, homography: np.nd
     through lenses (``sim/boards.py``, ``lens=True``, tuning seeds; docs/METHOD.md).
     """
     residual = residual_flow(left, right, homography, support, flow)
-    if not residual.support.any():
-        return float('inf')
-    lengths = np.hypot(residual.flow[..., 0], residual.flow[..., 1])[residual.support]
-    return min(float(np.median(lengths)) / residual.scale, lens_residual_px(residual))
+    plain = _median_px(residual)
+    return plain if math.isinf(plain) else min(plain, lens_residual_px(residual))
 
 
 def _jacobians(hom: np.ndarray, points: np.ndarray) -> np.ndarray:
