@@ -1,5 +1,8 @@
 """Rendered pairs from rigs the prior does not model: rough heads, swapped cameras, cuts.
 
+Also two cameras that see the light differently (:func:`camera_response`): each its own
+response curve and vignetting, on top of the renderer's gain and offset.
+
 A hand-assembled stereo head differs from the prior's camera model
 (:mod:`domplane_ros.core.prior`) by a small rotation of the right camera about its own centre
 (roll about the optical axis, relative pitch) and by its intrinsics (focal length, principal
@@ -143,6 +146,40 @@ def swapped(frame: StereoFrame) -> StereoFrame:
                                    flags=cv2.INTER_NEAREST) > 0
     return replace(frame, left=frame.right, right=frame.left, homography=inverse,
                    plane_left=moved, visible_in_right=moved.copy(), obstacle_left=obstacle)
+
+
+def camera_response(frame: StereoFrame, rng: np.random.Generator,
+                    gamma: tuple[float, float] = (0.75, 1.33),
+                    vignetting: tuple[float, float] = (0.15, 0.35)) -> StereoFrame:
+    """Return the pair seen through two cameras with their own response and vignetting.
+
+    Each image ``I`` becomes ``255 (I / 255)^g (1 - v r^2)``, rounded and clipped to 8 bits,
+    with its own ``g`` (log-uniform in ``gamma``) and ``v`` (uniform in ``vignetting``), ``r``
+    the distance to the image centre over the half diagonal: the corners are ``v`` darker. The
+    geometry and the truth are unchanged. Combine it with :func:`random_scene`'s ``gain`` and
+    ``offset`` for a right camera that is also exposed differently.
+
+    Args:
+        frame: A rendered pair.
+        rng: Source of the two cameras' draws (left first).
+        gamma: Range of the response exponents.
+        vignetting: Range of the darkening at the image corners.
+
+    Returns:
+        The :class:`StereoFrame` with both images changed.
+
+    """
+    images = []
+    for image in (frame.left, frame.right):
+        exponent = float(np.exp(rng.uniform(math.log(gamma[0]), math.log(gamma[1]))))
+        darkening = float(rng.uniform(*vignetting))
+        height, width = image.shape
+        ys, xs = np.mgrid[0:height, 0:width]
+        r2 = (((xs - 0.5 * (width - 1)) ** 2 + (ys - 0.5 * (height - 1)) ** 2)
+              / (0.25 * (width ** 2 + height ** 2)))
+        value = 255.0 * (image / 255.0) ** exponent * (1.0 - darkening * r2)
+        images.append(np.clip(np.rint(value), 0, 255).astype(np.uint8))
+    return replace(frame, left=images[0], right=images[1])
 
 
 def cut_sequence(n_before: int, n_after: int, seed: int, width: int = 640, height: int = 480,

@@ -11,6 +11,10 @@ OpenCV ORB + MAGSAC++ runs on the same pairs in the same run:
   roll up to 4 deg, relative pitch up to 2 deg, focal mismatch 3 %, principal points up to
   10 px apart);
 * ``swapped``: the same scenes with left and right exchanged (truth ``H^-1``);
+* ``lighting``: the same kind of scenes seen by two cameras that see the light differently:
+  the right camera's gain 0.8-1.25 and offset -20 to 20 grey levels, and each camera its own
+  response curve (gamma 0.75-1.33) and vignetting (15-35 % darker at the corners;
+  :func:`~domplane_ros.sim.rigs.camera_response`);
 * ``cuts``: 8 frames of one sequence then 8 of an unrelated one (scene, floor and set-up),
   through one pipeline: the frames after the cut, and the pairs to re-lock;
 * ``tiles_faint_*``: weakly textured tiled floors of three tile sizes
@@ -36,8 +40,8 @@ from typing import Callable, Sequence
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.model import StereoFrame
-from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, rough_rig,
-                                   swapped)
+from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
+                                   random_rig_error, rough_rig, swapped)
 from domplane_ros.sim.textures import FAINT_TILE_KINDS
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress
@@ -112,6 +116,8 @@ def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
         'rough': lambda s: rough_rig(random_scene(s), random_rig_error(
             np.random.default_rng((s, 77)))),
         'swapped': lambda s: swapped(random_scene(s)),
+        'lighting': lambda s: camera_response(random_scene(s, gain=None, offset=None),
+                                              np.random.default_rng((s, 555))),
     }
     tallies: dict[tuple[str, str], Tally] = {}
     for case, make in makers.items():

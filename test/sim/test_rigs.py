@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.sim.generators import random_scene
-from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, rig_warp, RigError, rough_rig,
-                                   swapped)
+from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px, rig_warp,
+                                   RigError, rough_rig, swapped)
 import numpy as np
 import pytest
 
@@ -57,3 +57,20 @@ def test_cut_joins_two_unrelated_sequences():
     frames = cut_sequence(2, 2, seed=1, width=160, height=120)
     assert len(frames) == 4
     assert not np.allclose(frames[1].homography, frames[2].homography, atol=1.0)
+
+
+def test_camera_response_changes_the_light_not_the_geometry(scene):
+    seen = camera_response(scene, np.random.default_rng(5), gamma=(0.75, 0.75),
+                           vignetting=(0.3, 0.3))
+    assert np.array_equal(seen.homography, scene.homography)
+    assert np.array_equal(seen.plane_left, scene.plane_left)
+    # Centre: only the response (255 (I / 255)^0.75, brighter); corners 30 % darker on top.
+    centre = scene.left[110:130, 150:170].astype(float)
+    expected = 255.0 * (centre / 255.0) ** 0.75
+    assert np.abs(seen.left[110:130, 150:170] - expected).max() <= 1.5
+    corner = scene.left[:4, :4].astype(float)
+    assert np.abs(seen.left[:4, :4] - 0.7 * 255.0 * (corner / 255.0) ** 0.75).max() <= 2.5
+    # Not a gain and offset: no affine map of the grey levels explains it.
+    a = np.stack([scene.left.ravel(), np.ones(scene.left.size)], axis=1).astype(float)
+    fit = np.linalg.lstsq(a, seen.left.ravel().astype(float), rcond=None)[0]
+    assert np.abs(a @ fit - seen.left.ravel()).mean() > 3.0

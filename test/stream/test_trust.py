@@ -17,8 +17,8 @@ from domplane_ros.core.estimator import estimate_plane, TwoStep
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
 from domplane_ros.sim.generators import random_scene
-from domplane_ros.sim.rigs import (cut_sequence, plane_error_px, random_rig_error, RigError,
-                                   rough_rig, swapped)
+from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
+                                   random_rig_error, RigError, rough_rig, swapped)
 from domplane_ros.stream import candidates as candidates_module
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
@@ -49,6 +49,19 @@ def test_true_plane_passes_and_shifted_planes_do_not(scene):
         wrong = gate.judge(scene.left, scene.right, _shifted(scene.homography, dx, dy))
         assert not wrong.accepted and 'not verified' in wrong.reason
         assert wrong.score < true.score
+
+
+def test_cameras_that_see_the_light_differently_change_no_verdict():
+    # Right camera 1.2x gain and -15 grey levels, each camera its own response and vignetting.
+    plain = random_scene(3, gain=1.2, offset=-15.0)
+    seen = camera_response(plain, np.random.default_rng(7), gamma=(0.75, 1.33),
+                           vignetting=(0.25, 0.35))
+    gate = TrustGate(VerificationSettings())
+    true = gate.judge(seen.left, seen.right, seen.homography)
+    assert true.accepted and true.confidence > 0.5, true.reason
+    for dx, dy in ((8.0, 0.0), (0.0, 8.0), (25.0, 0.0)):
+        wrong = gate.judge(seen.left, seen.right, _shifted(seen.homography, dx, dy))
+        assert not wrong.accepted and wrong.score < true.score
 
 
 def test_swapped_cameras_are_named(scene):
