@@ -25,7 +25,14 @@ PLAIN_FLOOR_KINDS = ('tiles_plain', 'planks_plain')
 # :func:`_faint_tiles_texture`). Also asked for by name only.
 FAINT_TILE_SIZES = {'tiles_faint_32': 32, 'tiles_faint_64': 64, 'tiles_faint_256': 256}
 FAINT_TILE_KINDS = tuple(FAINT_TILE_SIZES)
-ALL_FLOOR_KINDS = FLOOR_KINDS + PLAIN_FLOOR_KINDS + FAINT_TILE_KINDS
+# The periodic floors with other periods (texels; the defaults are 64 for checker squares and
+# tiles, 32 for plank widths): checker squares and tiles of 16 and 64 cm, planks 8 and 32 cm
+# wide. Asked for by name only.
+SIZED_FLOOR_SIZES = {'checker_32': ('checker', 32), 'checker_128': ('checker', 128),
+                     'tiles_32': ('tiles', 32), 'tiles_128': ('tiles', 128),
+                     'planks_16': ('planks', 16), 'planks_64': ('planks', 64)}
+SIZED_FLOOR_KINDS = tuple(SIZED_FLOOR_SIZES)
+ALL_FLOOR_KINDS = FLOOR_KINDS + PLAIN_FLOOR_KINDS + FAINT_TILE_KINDS + SIZED_FLOOR_KINDS
 
 # Texture rasters: size in texels (a power of two, so the mip pyramid halves exactly) and the
 # world size of one texel (camera height = 1).
@@ -83,12 +90,15 @@ def _floor_texture(kind: str, variant: int) -> np.ndarray:
         return _plain_floor_texture(kind, rng, n)
     if kind in FAINT_TILE_KINDS:
         return _faint_tiles_texture(FAINT_TILE_SIZES[kind], rng, n)
+    size = None
+    if kind in SIZED_FLOOR_SIZES:
+        kind, size = SIZED_FLOOR_SIZES[kind]
     if kind == 'random':
         return _random_texture(rng, n, ((16, 1.0), (64, 0.8), (256, 0.6), (512, 0.35)),
                                sharpness=1.6, grain=0.04)
     weak = 0.012 * _normalise(_periodic_noise(rng, n, n // 8))
     if kind == 'tiles':
-        tile = 64
+        tile = size or 64
         shades = 0.60 + 0.04 * rng.standard_normal((n // tile, n // tile))
         tex = np.kron(shades, np.ones((tile, tile))).astype(np.float32) + weak
         _draw_tile_joints(tex, tile, 0.30)
@@ -98,11 +108,11 @@ def _floor_texture(kind: str, variant: int) -> np.ndarray:
         grain = _blur_periodic(rng.standard_normal((n, n)).astype(np.float32), 1.0)
         grain = _normalise(cv2.blur(np.pad(grain, ((24, 24), (0, 0)), mode='wrap'),
                                     (1, 49))[24:-24])
-        _draw_planks(tex, rng, (200, 520), 0.18, shade=(0.45, 0.07))
+        _draw_planks(tex, rng, (200, 520), 0.18, shade=(0.45, 0.07), plank=size or 32)
         tex += 0.035 * grain + weak
         return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
     if kind == 'checker':
-        square = 64
+        square = size or 64
         idx = (np.arange(n) // square) % 2
         tex = np.where(idx[:, None] ^ idx[None, :], 0.75, 0.25).astype(np.float32) + weak
         return np.clip(_blur_periodic(tex, 0.7), 0.0, 1.0)
@@ -152,15 +162,15 @@ def _draw_tile_joints(tex: np.ndarray, tile: int, joint: float) -> None:
 
 
 def _draw_planks(tex: np.ndarray, rng: np.random.Generator, lengths: tuple[int, int],
-                 joint: float, shade: tuple[float, float] | None = None) -> None:
-    """Lay 32-texel wide planks along the rows of a square raster, in place.
+                 joint: float, shade: tuple[float, float] | None = None,
+                 plank: int = 32) -> None:
+    """Lay ``plank``-texel wide planks along the rows of a square raster, in place.
 
     Each column of planks starts at a random row; planks have a length drawn from
     ``lengths`` (texels), 3-texel end joints and 2-texel side joints of value ``joint``, and,
     if ``shade = (mean, std)`` is given, their own albedo drawn from it.
     """
     n = tex.shape[0]
-    plank = 32
     for col in range(n // plank):
         cols = slice(col * plank, (col + 1) * plank)
         start = int(rng.integers(0, n))

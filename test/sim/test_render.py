@@ -7,7 +7,7 @@ from domplane_ros.core import prior
 from domplane_ros.sim.model import BACKGROUNDS, Box, CameraSetup, StereoFrame
 from domplane_ros.sim.render import render_stereo
 from domplane_ros.sim.textures import (FAINT_TILE_KINDS, FAINT_TILE_SIZES, FLOOR_KINDS,
-                                       texture_pyramid)
+                                       SIZED_FLOOR_KINDS, SIZED_FLOOR_SIZES, texture_pyramid)
 import numpy as np
 import pytest
 
@@ -210,3 +210,23 @@ def test_faint_tiles_have_their_tile_size_faint_texture_and_match_after_warp(flo
     plane = _erode(frame.plane_left & frame.visible_in_right, 2) & _interior(
         frame.left.shape, 4)
     assert np.abs(warped - frame.left)[plane].mean() < 1.5
+
+
+@pytest.mark.parametrize('floor', SIZED_FLOOR_KINDS)
+def test_sized_floors_repeat_at_their_size(floor):
+    base, size = SIZED_FLOOR_SIZES[floor]
+    raster = texture_pyramid(floor, 0)[0]
+    # The joints (tiles, plank sides: the darkest columns) or the square edges (checker: the
+    # largest steps along a row) lie every `size` texels, not at the default kind's size.
+    n = raster.shape[0]
+    if base == 'checker':
+        edges = np.argsort(-np.abs(np.diff(raster[5].astype(np.float64))))[:n // size]
+        offsets = (edges + 1) % size
+    else:
+        offsets = np.argsort(raster.mean(axis=0))[:n // size] % size
+    assert np.all(np.minimum(offsets, size - offsets) <= 2), (floor, offsets)
+    frame = render_stereo(SETUP, BOXES, floor=floor, noise_std=0.0, seed=3)
+    warped = _warp_right_to_left(frame).astype(np.float64)
+    plane = _erode(frame.plane_left & frame.visible_in_right, 2) & _interior(
+        frame.left.shape, 4)
+    assert np.abs(warped - frame.left)[plane].mean() < 2.0
