@@ -39,6 +39,13 @@ round 11) the small shift is the one-sided one, true to scale, and it is judged 
 standard error (the pixel noise over ``window sqrt(confidence)``): plane where the residual
 it most probably comes from is below the threshold and the error is small enough to tell,
 obstacle only where it clears the threshold by two standard errors, unknown between.
+
+Behind the switch ``_MEASUREMENT`` (``'one_step'``, the default; ``'block'`` or
+``'semi_global'``: 1.4 and 1.9 times the mask's time, docs/MASK.md round 12) the residual
+parallax is an OpenCV stereo matcher's disparity on the left and warped images (signed shifts
+around zero, :func:`~domplane_ros.core.residual.matcher_shift`), averaged with the one-step
+shift where both measure; where the matcher finds no match the coarse flow and the zero-shift
+correlation decide, as for a large shift.
 """
 
 from __future__ import annotations

@@ -6,7 +6,9 @@ with ``one_sided``, the shift under linear interpolation, true to scale, and its
 the window statistics that say whether to trust it (zero-shift normalised correlation, left
 window variance), and the coarse shift of DIS optical flow for large parallax;
 :func:`shifted_ncc` the correlation of the same windows with the warped image moved by a
-per-pixel shift (the coarse flow's, to test it against the zero shift). The float
+per-pixel shift (the coarse flow's, to test it against the zero shift);
+:func:`matcher_shift` the signed residual parallax of OpenCV's stereo matchers
+(``cv2.StereoBM``, ``cv2.StereoSGBM``) around zero (docs/MASK.md round 12). The float
 images are this thread's :func:`~domplane_ros.core.scratch.scratch` arrays: a
 :class:`LocalFit` is valid until the next call in the same thread.
 """
