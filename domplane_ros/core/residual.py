@@ -396,7 +396,7 @@ def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, win
 
 
 # Stereo matchers on (left, warped) (docs/MASK.md round 12): disparities
-# _MATCHER_MIN_PX .. _MATCHER_MIN_PX + _MATCHER_COUNT - 1 working pixels (OpenCV's disparity
+# MATCHER_MIN_PX .. MATCHER_MIN_PX + MATCHER_COUNT - 1 working pixels (OpenCV's disparity
 # is the residual parallax: a point nearer than the plane shows at x - r in the warped image),
 # square block of _MATCHER_BLOCK_PX, uniqueness ratio _MATCHER_UNIQUENESS (per cent), the
 # block matcher's texture threshold _MATCHER_TEXTURE.
@@ -440,7 +440,7 @@ def matcher_shift(left: np.ndarray, warped: np.ndarray, kind: str = 'block',
     The matcher searches the signed shifts ``minimum .. minimum + count - 1`` (working pixels;
     ``count`` a multiple of 16) around zero on the left and the warped image, both padded by
     replicating their side columns so that the image's own columns are searched over the whole
-    range (OpenCV leaves the first ``minimum + count`` columns unmatched). Its disparity
+    range (OpenCV leaves the columns whose search runs past a side unmatched). Its disparity
     ``d`` says ``left(x) ~ warped(x - d)``: the residual parallax, positive nearer than the
     plane (1/16 pixel steps). Where the matcher finds no match (too little texture, a second
     best match too close, OpenCV's invalid value ``(minimum - 1) * 16``) or the match lies on
@@ -459,9 +459,15 @@ def matcher_shift(left: np.ndarray, warped: np.ndarray, kind: str = 'block',
         (h, w) float32 residual parallax, working pixels (0 where not measured), and (h, w)
         bool where it was measured.
 
+    Raises:
+        ValueError: If ``kind`` is not a matcher's name or ``count`` not a positive multiple
+            of 16.
+
     """
-    minimum = MATCHER_MIN_PX if minimum is None else minimum
-    count = MATCHER_COUNT if count is None else count
+    minimum = MATCHER_MIN_PX if minimum is None else int(minimum)
+    count = MATCHER_COUNT if count is None else int(count)
+    if count <= 0 or count % 16:
+        raise ValueError(f'count must be a positive multiple of 16, got {count}')
     height, width = left.shape
     pad = max(-minimum, minimum + count, 0) + _MATCHER_BLOCK_PX
     if height < _MATCHER_BLOCK_PX:

@@ -93,3 +93,11 @@ def test_semi_global_measurement_finds_more_of_the_boxes(monkeypatch):
     assert matched['obstacle_recall'] > 0.945 and one_step['obstacle_recall'] < 0.935
     assert matched['ground_as_obstacle'] < 0.011 < one_step['ground_as_obstacle']
     assert matched['plane_iou'] > 0.86, matched
+
+
+def test_matcher_rejects_what_opencv_cannot_search():
+    left = _texture()
+    with pytest.raises(ValueError, match='multiple of 16'):
+        residual.matcher_shift(left, left, 'block', count=20)
+    with pytest.raises(ValueError, match='unknown matcher'):
+        residual.matcher_shift(left, left, 'dense')
