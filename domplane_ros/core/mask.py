@@ -39,11 +39,18 @@ round 11) the small shift is the one-sided one, true to scale, and it is judged 
 standard error (the pixel noise over ``window sqrt(confidence)``): plane where the residual
 it most probably comes from is below the threshold and the error is small enough to tell,
 obstacle only where it clears the threshold by two standard errors, unknown between.
+
+Behind the switch ``_MEASUREMENT`` (``'one_step'``, the default; ``'block'`` or
+``'semi_global'``: 1.4 and 1.9 times the mask's time, docs/MASK.md round 12) the residual
+parallax is an OpenCV stereo matcher's disparity on the left and warped images (signed shifts
+around zero, :func:`~domplane_ros.core.residual.matcher_shift`), averaged with the one-step
+shift where both measure; where the matcher finds no match the coarse flow and the zero-shift
+correlation decide, as for a large shift.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 from typing import Sequence
 
@@ -54,7 +61,7 @@ from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
 from domplane_ros.core.parallax import height_factor, infinity_shift
 from domplane_ros.core.residual import (beyond_linear_range, flow_shift, local_fit, LocalFit,
-                                        MIN_GRADIENT_ENERGY)
+                                        matcher_shift, MIN_GRADIENT_ENERGY)
 from domplane_ros.core.scratch import constant
 import numpy as np
 
@@ -73,6 +80,17 @@ _LINEAR_RANGE_PX = 1.0
 # pixel noise over window * sqrt(confidence). With both off, round 10's mask: the one-step
 # shift against the threshold alone.
 _NOISE_AWARE = False
+# The measurement of the residual parallax (docs/MASK.md round 12): 'one_step' (the local
+# fit's one-step shift, trusted within _LINEAR_RANGE_PX and tested against the coarse flow),
+# 'block' (cv2.StereoBM on the left and warped images) or 'semi_global' (cv2.StereoSGBM):
+# the matcher's disparity is the residual parallax wherever it matched (no linear range, no
+# test against the coarse flow); where it did not, the coarse flow and the zero-shift
+# correlation decide, as for a large shift. Not the default: docs/MASK.md round 12.
+_MEASUREMENT = 'one_step'
+# With a matcher, the residual parallax is the mean of the matcher's and the one-step shift
+# where both measured (the one-step shift within _LINEAR_RANGE_PX): the matcher's sub-pixel
+# reading locks onto whole working pixels, the one-step one is noisy (round 12).
+_MATCHER_AVERAGE = True
 # A measured shift is an obstacle only where it clears the threshold by this many standard
 # errors; one at or above the threshold that does not is unknown (the clean-up and the fill
 # may still close it into the plane around it).
@@ -345,11 +363,16 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
     fit = local_fit(left, warped, int(config.window_px), coarse, _NOISE_AWARE, valid)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
-    beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
-                                 float(config.ncc_threshold), _LINEAR_RANGE_PX)
+    matched = None
+    if _MEASUREMENT == 'one_step':
+        beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
+                                     float(config.ncc_threshold), _LINEAR_RANGE_PX)
+    else:
+        fit, matched = _matcher_fit(left, warped, fit)
+        beyond = None
     noise = fit.noise if _NOISE_AWARE else None
     labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
-                                            beyond, noise)
+                                            beyond, noise, matched)
     share = _TRUE_SCALE_RISE_SHARE if _NOISE_AWARE else _RISE_SHARE
     rise_px = share * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
@@ -361,6 +384,23 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid,
                    (flow, float(config.parallax_threshold_px) / px_per_working))
     return labels, parallax
+
+
+def _matcher_fit(left: np.ndarray, warped: np.ndarray, fit: LocalFit
+                 ) -> tuple[LocalFit, np.ndarray]:
+    """Return the fit with the matcher's shift (:data:`_MEASUREMENT`) and where it matched.
+
+    The shift is :func:`~domplane_ros.core.residual.matcher_shift`'s (working pixels, 0 where
+    it found no match), or with :data:`_MATCHER_AVERAGE` its mean with the fit's one-step
+    shift where that is within :data:`_LINEAR_RANGE_PX` too. Returns the new
+    :class:`LocalFit` and the (h, w) bool pixels the matcher matched.
+    """
+    shift, matched = matcher_shift(left, warped, _MEASUREMENT)
+    if _MATCHER_AVERAGE:
+        both = matched & (np.abs(fit.shift) < np.float32(_LINEAR_RANGE_PX))
+        mean = cv2.addWeighted(shift, 0.5, fit.shift, 0.5, 0.0)
+        _copy_where(mean, both, shift)
+    return replace(fit, shift=shift), matched
 
 
 def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
@@ -422,7 +462,8 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
 
 def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
               px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None,
-              noise: float | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+              noise: float | None = None, matched: np.ndarray | None = None
+              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the working-scale labels, the parallax image and the decidable pixels.
 
     Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
@@ -430,12 +471,17 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose small shift
     is not trusted. ``noise`` (grey levels, :func:`~domplane_ros.core.residual.pixel_noise`)
     with a one-sided fit: the small shifts are judged by :func:`_judge` knowing their
-    standard error; None: against the threshold alone.
+    standard error; None: against the threshold alone. ``matched`` ((h, w) bool): the fit's
+    shift is a stereo matcher's (:func:`_matcher_fit`), measured at any size where it holds;
+    None: the one-step shift, measured only within :data:`_LINEAR_RANGE_PX`.
     """
     threshold = float(config.parallax_threshold_px)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
-    small = measurable & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
-    small &= fit.ncc >= float(config.ncc_threshold)
+    if matched is None:
+        small = measurable & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
+        small &= fit.ncc >= float(config.ncc_threshold)
+    else:  # a matcher: its shift wherever it matched
+        small = measurable & matched
     if beyond is not None:
         small &= ~beyond
     residual = fit.flow_shift  # in place: the fit is not read again
@@ -449,6 +495,8 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
                                noise * px_per_working / float(config.window_px), threshold)
     else:
         plane, unsure = small & (magnitude < threshold), None
+        if matched is not None:  # plane needs the zero-shift correlation, as before
+            plane &= fit.ncc >= float(config.ncc_threshold)
     labels = (plane & decidable).view(np.uint8) * np.uint8(PLANE)
     # Off the plane: a measured parallax at or above the threshold (beyond the noise), or a
     # clear zero-shift mismatch. An obstacle is nearer than infinity by the threshold and

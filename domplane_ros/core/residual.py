@@ -6,7 +6,9 @@ with ``one_sided``, the shift under linear interpolation, true to scale, and its
 the window statistics that say whether to trust it (zero-shift normalised correlation, left
 window variance), and the coarse shift of DIS optical flow for large parallax;
 :func:`shifted_ncc` the correlation of the same windows with the warped image moved by a
-per-pixel shift (the coarse flow's, to test it against the zero shift). The float
+per-pixel shift (the coarse flow's, to test it against the zero shift);
+:func:`matcher_shift` the signed residual parallax of OpenCV's stereo matchers
+(``cv2.StereoBM``, ``cv2.StereoSGBM``) around zero (docs/MASK.md round 12). The float
 images are this thread's :func:`~domplane_ros.core.scratch.scratch` arrays: a
 :class:`LocalFit` is valid until the next call in the same thread.
 """
@@ -391,3 +393,91 @@ def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, win
     zero = cv2.dilate(fit.ncc, _SQUARE_3)[band]
     candidates[band] &= shifted_ncc(left, warped, fit, band, window) > zero
     return candidates
+
+
+# Stereo matchers on (left, warped) (docs/MASK.md round 12): disparities
+# MATCHER_MIN_PX .. MATCHER_MIN_PX + MATCHER_COUNT - 1 working pixels (OpenCV's disparity
+# is the residual parallax: a point nearer than the plane shows at x - r in the warped image),
+# square block of _MATCHER_BLOCK_PX, uniqueness ratio _MATCHER_UNIQUENESS (per cent), the
+# block matcher's texture threshold _MATCHER_TEXTURE.
+MATCHER_MIN_PX = -16
+MATCHER_COUNT = 32
+_MATCHER_BLOCK_PX = 7
+_MATCHER_UNIQUENESS = 10
+_MATCHER_TEXTURE = 10
+_SGBM_BLOCK_PX = 3
+# StereoSGBM's smoothness penalties per block pixel (OpenCV's sample: 8 and 32) and its mode.
+_SGBM_P1 = 8
+_SGBM_P2 = 32
+_SGBM_MODE = cv2.STEREO_SGBM_MODE_SGBM_3WAY
+
+
+def _stereo_matcher(kind: str, minimum: int, count: int) -> cv2.StereoMatcher:
+    """Return a new OpenCV matcher: ``'block'`` StereoBM, ``'semi_global'`` StereoSGBM 3-way."""
+    if kind == 'block':
+        matcher = cv2.StereoBM_create(numDisparities=count, blockSize=_MATCHER_BLOCK_PX)
+        matcher.setMinDisparity(minimum)
+        matcher.setUniquenessRatio(_MATCHER_UNIQUENESS)
+        matcher.setTextureThreshold(_MATCHER_TEXTURE)
+        matcher.setSpeckleWindowSize(0)
+        matcher.setDisp12MaxDiff(-1)
+        return matcher
+    if kind == 'semi_global':
+        block = _SGBM_BLOCK_PX
+        return cv2.StereoSGBM_create(minDisparity=minimum, numDisparities=count,
+                                     blockSize=block, P1=_SGBM_P1 * block * block,
+                                     P2=_SGBM_P2 * block * block, disp12MaxDiff=-1,
+                                     uniquenessRatio=_MATCHER_UNIQUENESS, speckleWindowSize=0,
+                                     mode=_SGBM_MODE)
+    raise ValueError(f'unknown matcher {kind!r}')
+
+
+def matcher_shift(left: np.ndarray, warped: np.ndarray, kind: str = 'block',
+                  minimum: int | None = None, count: int | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the residual parallax of an OpenCV stereo matcher and where it was measured.
+
+    The matcher searches the signed shifts ``minimum .. minimum + count - 1`` (working pixels;
+    ``count`` a multiple of 16) around zero on the left and the warped image, both padded by
+    replicating their side columns so that the image's own columns are searched over the whole
+    range (OpenCV leaves the columns whose search runs past a side unmatched). Its disparity
+    ``d`` says ``left(x) ~ warped(x - d)``: the residual parallax, positive nearer than the
+    plane (1/16 pixel steps). Where the matcher finds no match (too little texture, a second
+    best match too close, OpenCV's invalid value ``(minimum - 1) * 16``) or the match lies on
+    the range's ends, nothing is measured.
+
+    Args:
+        left: (h, w) uint8 left image at the working scale.
+        warped: (h, w) uint8 right image warped into the left view.
+        kind: ``'block'`` (``cv2.StereoBM``) or ``'semi_global'`` (``cv2.StereoSGBM``).
+        minimum: Smallest shift searched, working pixels (negative: farther than the plane);
+            None: :data:`MATCHER_MIN_PX`.
+        count: Number of shifts searched, a positive multiple of 16; None:
+            :data:`MATCHER_COUNT`.
+
+    Returns:
+        (h, w) float32 residual parallax, working pixels (0 where not measured), and (h, w)
+        bool where it was measured.
+
+    Raises:
+        ValueError: If ``kind`` is not a matcher's name or ``count`` not a positive multiple
+            of 16.
+
+    """
+    minimum = MATCHER_MIN_PX if minimum is None else int(minimum)
+    count = MATCHER_COUNT if count is None else int(count)
+    if count <= 0 or count % 16:
+        raise ValueError(f'count must be a positive multiple of 16, got {count}')
+    height, width = left.shape
+    pad = max(-minimum, minimum + count, 0) + _MATCHER_BLOCK_PX
+    if height < _MATCHER_BLOCK_PX:
+        return np.zeros((height, width), np.float32), np.zeros((height, width), bool)
+    padded_left = cv2.copyMakeBorder(left, 0, 0, pad, pad, cv2.BORDER_REPLICATE)
+    padded_warped = cv2.copyMakeBorder(warped, 0, 0, pad, pad, cv2.BORDER_REPLICATE)
+    disparity = _stereo_matcher(kind, minimum, count).compute(padded_left, padded_warped)
+    disparity = disparity[:, pad:pad + width]
+    measured = (disparity > 16 * minimum) & (disparity < 16 * (minimum + count - 1))
+    shift = disparity.astype(np.float32)
+    shift *= np.float32(1.0 / 16.0)
+    shift[~measured] = 0.0
+    return shift, measured
