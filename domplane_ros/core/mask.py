@@ -34,23 +34,18 @@ obstacle face carries its edges' parallax. The residual parallax itself is retur
 labels. Rows wholly above the horizon (less a margin) are unknown without being measured:
 no pixel there could be plane or obstacle, and the labels equal those of measuring them.
 
-Behind the switch ``_NOISE_AWARE`` (off: it costs 1.2-1.25 times the mask's time, docs/MASK.md
-round 11) the small shift is the one-sided one, true to scale, and it is judged knowing its
-standard error (the pixel noise over ``window sqrt(confidence)``): plane where the residual
-it most probably comes from is below the threshold and the error is small enough to tell,
-obstacle only where it clears the threshold by two standard errors, unknown between.
-
-Behind the switch ``_MEASUREMENT`` (``'one_step'``, the default; ``'block'`` or
-``'semi_global'``: 1.4 and 1.9 times the mask's time, docs/MASK.md round 12) the residual
-parallax is an OpenCV stereo matcher's disparity on the left and warped images (signed shifts
-around zero, :func:`~domplane_ros.core.residual.matcher_shift`), averaged with the one-step
-shift where both measure; where the matcher finds no match the coarse flow and the zero-shift
-correlation decide, as for a large shift.
+Each pixel's own decision, the measurement and the classification of its residual parallax
+with the switches ``_NOISE_AWARE`` and ``_MEASUREMENT`` (not the default), is
+:mod:`domplane_ros.core.pixel_decision`'s; this module, the public entry, warps and cuts the
+images, cleans the labels up, hides the floor the right camera cannot see, fills, upsamples,
+draws the :func:`overlay` and gives the :func:`mask_scores`. The label values and
+:data:`NOT_MEASURED` are defined in :mod:`domplane_ros.core.pixel_decision`; import them
+from here, with the rest of the public API.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import math
 from typing import Sequence
 
@@ -59,60 +54,22 @@ from domplane_ros.config import MaskConfig
 from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.occlusion import occlusion_shadow
-from domplane_ros.core.parallax import height_factor, infinity_shift
-from domplane_ros.core.residual import (beyond_linear_range, flow_shift, local_fit, LocalFit,
-                                        matcher_shift, MIN_GRADIENT_ENERGY)
-from domplane_ros.core.scratch import constant
+from domplane_ros.core.parallax import infinity_shift
+from domplane_ros.core.pixel_decision import (decide_pixels, NOT_MEASURED, OBSTACLE, PLANE,
+                                              set_where, UNKNOWN)
+from domplane_ros.core.residual import flow_shift
 import numpy as np
 
-PLANE = 255
-OBSTACLE = 127
-UNKNOWN = 0
-# Value of the parallax image where the residual parallax was not measured.
-NOT_MEASURED = -1.0
+# The public names, the label values and NOT_MEASURED among them (from pixel_decision).
+__all__ = ['DEFAULT_FOCAL_PX', 'INLIER_RGB', 'mask_scores', 'NOT_MEASURED', 'OBSTACLE',
+           'OBSTACLE_RGB', 'OUTLIER_RGB', 'overlay', 'parallax_mask', 'ParallaxMask', 'PLANE',
+           'PLANE_RGB', 'plane_mask', 'UNKNOWN']
+
 # Default focal range (the default prior's) for the plane-at-infinity fit.
 DEFAULT_FOCAL_PX = (400.0, 900.0)
 
-# The one-step estimate is linear in the shift up to about a pixel at the working scale.
-_LINEAR_RANGE_PX = 1.0
-# The shift and the decision (docs/MASK.md round 11): the one-sided shift, true to scale
-# (residual.local_fit's one_sided), judged knowing its noise. Its standard error ``se`` is the
-# pixel noise over window * sqrt(confidence). With both off, round 10's mask: the one-step
-# shift against the threshold alone.
-_NOISE_AWARE = False
-# The measurement of the residual parallax (docs/MASK.md round 12): 'one_step' (the local
-# fit's one-step shift, trusted within _LINEAR_RANGE_PX and tested against the coarse flow),
-# 'block' (cv2.StereoBM on the left and warped images) or 'semi_global' (cv2.StereoSGBM):
-# the matcher's disparity is the residual parallax wherever it matched (no linear range, no
-# test against the coarse flow); where it did not, the coarse flow and the zero-shift
-# correlation decide, as for a large shift. Not the default: docs/MASK.md round 12.
-_MEASUREMENT = 'one_step'
-# With a matcher, the residual parallax is the mean of the matcher's and the one-step shift
-# where both measured (the one-step shift within _LINEAR_RANGE_PX): the matcher's sub-pixel
-# reading locks onto whole working pixels, the one-step one is noisy (round 12).
-_MATCHER_AVERAGE = True
-# A measured shift is an obstacle only where it clears the threshold by this many standard
-# errors; one at or above the threshold that does not is unknown (the clean-up and the fill
-# may still close it into the plane around it).
-_OBSTACLE_SE = 2.0
-# A measured shift is plane where the residual parallax it most probably comes from is below
-# the threshold, under a normal prior of this spread (full-resolution pixels) on the ground:
-# |r| < threshold * (1 + (se / spread)^2), the posterior mean below the threshold.
-_PRIOR_SPREAD_PX = 1.0
-# ... and only where its standard error is below this share of the threshold: a noisier
-# window cannot tell the ground from an obstacle at the threshold (unknown).
-_PLANE_MAX_SE = 1.3
-# Zero-shift NCC below which a textured window is off the plane without a measured parallax.
-_REJECT_NCC = 0.5
-# Where an obstacle of the minimum height would not show, an obstacle needs this many times
-# the parallax threshold (the coarse flow is not trusted near it there).
-_FAR_FACTOR = 3.0
-# The bottom of an obstacle: a pixel measured within the threshold but nearer than the plane
-# by at least this share of it, with an obstacle at most _RISE_ROWS working pixels above it in
-# its column, is unknown, not plane (chosen on the tuning scenes, docs/MASK.md round 4; with
-# the noise-aware decision on the shift true to scale, 0.7 of it: round 11).
-_RISE_SHARE = 0.4
-_TRUE_SCALE_RISE_SHARE = 0.7
+# An obstacle at most this many working rows above a rising plane pixel in its column
+# (pixel_decision.PixelDecision.rising) makes it unknown (docs/MASK.md round 4).
 _RISE_ROWS = 8
 # An unknown region is filled as plane when at least this share of its outline inside the
 # right image is plane, and that outline has at least this many pixels.
@@ -231,7 +188,7 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray,
         chosen = fill.view(np.uint8)[components]
     height, width = labels.shape
     chosen = _upsample(chosen, (2 * chosen.shape[1], 2 * chosen.shape[0]))[:height, :width]
-    _set_where(labels, PLANE, chosen.view(bool) & fillable)
+    set_where(labels, PLANE, chosen.view(bool) & fillable)
 
 
 def _check_focal(focal_px: tuple[float, float]) -> tuple[float, float]:
@@ -316,9 +273,10 @@ def _first_row(shift_inf: np.ndarray) -> int | None:
     """Return the first working row the mask needs, or None when no pixel is below the horizon.
 
     At and above the plane's horizon (``shift_inf <= 0``) no pixel can be plane or obstacle
-    (:func:`_classify`), so rows wholly above it are unknown and not measured. The cut keeps
-    :data:`_CUT_MARGIN_PX` rows above the first row below the horizon (the windows, the
-    clean-up and the occlusion band reach that far) and starts on a multiple of it.
+    (:func:`~domplane_ros.core.pixel_decision.decide_pixels`), so rows wholly above it are
+    unknown and not measured. The cut keeps :data:`_CUT_MARGIN_PX` rows above the first row
+    below the horizon (the windows, the clean-up and the occlusion band reach that far) and
+    starts on a multiple of it.
     """
     below = (shift_inf > 0).ravel()
     first = int(np.argmax(below))  # the first pixel below the horizon, 0 if there is none
@@ -346,6 +304,10 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
                 halves: tuple[np.ndarray, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     """Return the working-scale labels and parallax of the rows of ``left``.
 
+    Each pixel's decision (:func:`~domplane_ros.core.pixel_decision.decide_pixels`), then
+    what pixels decide together: the clean-up, plane rising into an obstacle made unknown,
+    the floor hidden from the right camera, the fill of plain regions.
+
     Args:
         left: (h, w) uint8 left image at the working scale (the rows the mask needs).
         warped: (h, w) uint8 right image warped into the left view, the same rows.
@@ -361,46 +323,16 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
 
     """
     flow = coarse[::2, ::2].copy()  # the fill's; ``coarse`` is a scratch array
-    fit = local_fit(left, warped, int(config.window_px), coarse, _NOISE_AWARE, valid)
-    measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
-    matched = None
-    if _MEASUREMENT == 'one_step':
-        beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
-                                     float(config.ncc_threshold), _LINEAR_RANGE_PX)
-    else:
-        fit, matched = _matcher_fit(left, warped, fit)
-        beyond = None
-    noise = fit.noise if _NOISE_AWARE else None
-    labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
-                                            beyond, noise, matched)
-    share = _TRUE_SCALE_RISE_SHARE if _NOISE_AWARE else _RISE_SHARE
-    rise_px = share * float(config.parallax_threshold_px) / px_per_working
-    rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
-    _clean(labels, valid, decidable, int(config.morph_px))
-    _unknown_below_obstacles(labels, rising)
+    decision = decide_pixels(left, warped, valid, coarse, shift_inf, px_per_working, config)
+    labels, parallax = decision.labels, decision.parallax
+    _clean(labels, valid, decision.decidable, int(config.morph_px))
+    _unknown_below_obstacles(labels, decision.rising)
     hidden = occlusion_shadow(left, warped, labels == OBSTACLE, halves)
-    _set_where(labels, UNKNOWN, hidden)
-    _set_where(parallax, NOT_MEASURED, hidden)
-    _fill_enclosed(labels, (labels == UNKNOWN) & valid & decidable, valid,
+    set_where(labels, UNKNOWN, hidden)
+    set_where(parallax, NOT_MEASURED, hidden)
+    _fill_enclosed(labels, (labels == UNKNOWN) & valid & decision.decidable, valid,
                    (flow, float(config.parallax_threshold_px) / px_per_working))
     return labels, parallax
-
-
-def _matcher_fit(left: np.ndarray, warped: np.ndarray, fit: LocalFit
-                 ) -> tuple[LocalFit, np.ndarray]:
-    """Return the fit with the matcher's shift (:data:`_MEASUREMENT`) and where it matched.
-
-    The shift is :func:`~domplane_ros.core.residual.matcher_shift`'s (working pixels, 0 where
-    it found no match), or with :data:`_MATCHER_AVERAGE` its mean with the fit's one-step
-    shift where that is within :data:`_LINEAR_RANGE_PX` too. Returns the new
-    :class:`LocalFit` and the (h, w) bool pixels the matcher matched.
-    """
-    shift, matched = matcher_shift(left, warped, _MEASUREMENT)
-    if _MATCHER_AVERAGE:
-        both = matched & (np.abs(fit.shift) < np.float32(_LINEAR_RANGE_PX))
-        mean = cv2.addWeighted(shift, 0.5, fit.shift, 0.5, 0.0)
-        _copy_where(mean, both, shift)
-    return replace(fit, shift=shift), matched
 
 
 def plane_mask(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
@@ -460,118 +392,6 @@ def _inside(right_shape: tuple[int, int], homography: np.ndarray, size: tuple[in
                                borderMode=cv2.BORDER_CONSTANT, borderValue=0)
 
 
-def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
-              px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None,
-              noise: float | None = None, matched: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Return the working-scale labels, the parallax image and the decidable pixels.
-
-    Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
-    at least ``config.parallax_threshold_px`` of residual parallax. ``beyond`` ((h, w) bool,
-    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose small shift
-    is not trusted. ``noise`` (grey levels, :func:`~domplane_ros.core.residual.pixel_noise`)
-    with a one-sided fit: the small shifts are judged by :func:`_judge` knowing their
-    standard error; None: against the threshold alone. ``matched`` ((h, w) bool): the fit's
-    shift is a stereo matcher's (:func:`_matcher_fit`), measured at any size where it holds;
-    None: the one-step shift, measured only within :data:`_LINEAR_RANGE_PX`.
-    """
-    threshold = float(config.parallax_threshold_px)
-    measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
-    if matched is None:
-        small = measurable & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
-        small &= fit.ncc >= float(config.ncc_threshold)
-    else:  # a matcher: its shift wherever it matched
-        small = measurable & matched
-    if beyond is not None:
-        small &= ~beyond
-    residual = fit.flow_shift  # in place: the fit is not read again
-    _copy_where(fit.shift, small, residual)
-    residual *= np.float32(px_per_working)
-    magnitude = np.abs(residual)
-    # kappa * shift_inf is the parallax an obstacle of the minimum height would show.
-    decidable = shift_inf >= threshold / height_factor(float(config.min_obstacle_height))
-    if noise is not None and fit.energy is not None:
-        plane, unsure = _judge(magnitude, fit.energy, small,
-                               noise * px_per_working / float(config.window_px), threshold)
-    else:
-        plane, unsure = small & (magnitude < threshold), None
-        if matched is not None:  # plane needs the zero-shift correlation, as before
-            plane &= fit.ncc >= float(config.ncc_threshold)
-    labels = (plane & decidable).view(np.uint8) * np.uint8(PLANE)
-    # Off the plane: a measured parallax at or above the threshold (beyond the noise), or a
-    # clear zero-shift mismatch. An obstacle is nearer than infinity by the threshold and
-    # below the horizon; where an obstacle of the minimum height would not show, only a
-    # clearly larger parallax (the coarse flow is not trusted near the threshold there)
-    # counts. A point farther than the plane but nearer than infinity (a hole in the ground)
-    # is an obstacle too.
-    off = (magnitude >= threshold) | (fit.ncc < _REJECT_NCC)
-    if unsure is not None:
-        off &= ~unsure
-    off &= measurable & ~plane & (shift_inf > 0)
-    off &= decidable | (residual >= _FAR_FACTOR * threshold)
-    residual += shift_inf
-    off &= residual >= threshold
-    _set_where(labels, OBSTACLE, off)
-    if fit.energy is not None:  # no texture along the epipolar direction: not measured
-        measurable &= fit.energy >= np.float32(MIN_GRADIENT_ENERGY)
-    _set_where(magnitude, NOT_MEASURED, ~measurable)
-    return labels, magnitude, decidable
-
-
-def _judge(magnitude: np.ndarray, energy: np.ndarray, small: np.ndarray, error_scale: float,
-           threshold: float) -> tuple[np.ndarray, np.ndarray]:
-    """Return the (h, w) bool plane and unsure pixels among the small measured shifts.
-
-    The shift's standard error is ``se = error_scale / sqrt(energy)`` (full-resolution
-    pixels; ``error_scale`` the pixel noise over the window side, in full-resolution pixels,
-    the energy taken at least :data:`MIN_GRADIENT_ENERGY`). Plane: ``|r| < threshold
-    (1 + (se / spread)^2)`` (:data:`_PRIOR_SPREAD_PX`) and ``se`` below
-    :data:`_PLANE_MAX_SE` of the threshold. Unsure: not plane and ``|r| - k se`` below the
-    threshold (:data:`_OBSTACLE_SE`): not an obstacle either. Compared without square roots
-    or divisions: with ``d = |r| - threshold``, plane is ``d energy < threshold
-    error_scale^2 / spread^2``, cleared ``d >= 0`` and ``d^2 energy >= k^2 error_scale^2``.
-
-    Args:
-        magnitude: (h, w) float32 |residual parallax|, full-resolution pixels.
-        energy: (h, w) float32 confidence of the one-sided shifts (:class:`LocalFit`).
-        small: (h, w) bool pixels whose small shift was measured.
-        error_scale: Pixel noise over the window side, in full-resolution pixels.
-        threshold: The parallax threshold, full-resolution pixels.
-
-    Returns:
-        (h, w) bool plane and (h, w) bool unsure pixels.
-
-    """
-    scale_sq = np.float32(error_scale * error_scale)
-    # numpy with scalars: OpenCV reads a Python number beside an (n, 1) array as a 4-vector.
-    confident = np.maximum(energy, np.float32(MIN_GRADIENT_ENERGY))
-    excess = magnitude - np.float32(threshold)
-    weighted = cv2.multiply(excess, confident)
-    plane = weighted < np.float32(threshold * scale_sq / _PRIOR_SPREAD_PX ** 2)
-    # se < m threshold  <=>  energy > (error_scale / (m threshold))^2
-    plane &= confident > np.float32(scale_sq / (_PLANE_MAX_SE * threshold) ** 2)
-    plane &= small
-    cleared = cv2.multiply(weighted, excess, dst=weighted) >= np.float32(
-        _OBSTACLE_SE ** 2 * scale_sq)
-    cleared &= excess >= np.float32(0.0)
-    unsure = small & ~plane & ~cleared
-    return plane, unsure
-
-
-def _copy_where(source: np.ndarray, where: np.ndarray, target: np.ndarray) -> None:
-    """Copy ``source`` into ``target`` where the (h, w) bool ``where`` holds, in place.
-
-    ``cv2.copyTo`` with the mask viewed as bytes: numpy's boolean indexing and ``np.where``
-    take ten times longer on irregular masks.
-    """
-    cv2.copyTo(source, where.view(np.uint8), target)
-
-
-def _set_where(target: np.ndarray, value: float, where: np.ndarray) -> None:
-    """Set ``target`` to ``value`` where the (h, w) bool ``where`` holds, in place."""
-    _copy_where(constant(value, target.shape, target.dtype), where, target)
-
-
 def _clean(labels: np.ndarray, valid: np.ndarray, decidable: np.ndarray, morph: int) -> None:
     """Clean the labels in place with a ``morph`` square (< 2: no-op).
 
@@ -585,11 +405,11 @@ def _clean(labels: np.ndarray, valid: np.ndarray, decidable: np.ndarray, morph: 
     region = labels == OBSTACLE
     cleaned = cv2.morphologyEx(region.view(np.uint8), cv2.MORPH_OPEN, square)
     cleaned = cv2.morphologyEx(cleaned, cv2.MORPH_CLOSE, square, dst=cleaned).view(bool)
-    _set_where(labels, UNKNOWN, region & ~cleaned)
-    _set_where(labels, OBSTACLE, cleaned & ~region & valid)
+    set_where(labels, UNKNOWN, region & ~cleaned)
+    set_where(labels, OBSTACLE, cleaned & ~region & valid)
     closed = cv2.morphologyEx((labels == PLANE).view(np.uint8), cv2.MORPH_CLOSE,
                               square).view(bool)
-    _set_where(labels, PLANE, closed & (labels == UNKNOWN) & valid & decidable)
+    set_where(labels, PLANE, closed & (labels == UNKNOWN) & valid & decidable)
 
 
 def _unknown_below_obstacles(labels: np.ndarray, rising: np.ndarray) -> None:
@@ -598,16 +418,17 @@ def _unknown_below_obstacles(labels: np.ndarray, rising: np.ndarray) -> None:
     The bottom of a wall or a box below the minimum height shows less parallax than the
     threshold, so it measures as plane; but its parallax is positive (nearer than the plane)
     and grows up to the obstacle above, while the ground's is zero up to noise. A plane pixel
-    whose measured parallax is at least :data:`_RISE_SHARE` of the threshold (``rising``,
-    (h, w) bool) with an obstacle at most :data:`_RISE_ROWS` rows above it in its column
-    cannot be told from that bottom: it becomes unknown.
+    whose measured parallax is at least a share of the threshold (``rising``, (h, w) bool,
+    :class:`~domplane_ros.core.pixel_decision.PixelDecision`) with an obstacle at most
+    :data:`_RISE_ROWS` rows above it in its column cannot be told from that bottom: it becomes
+    unknown.
     """
     if not rising.any():
         return
     column = np.ones((_RISE_ROWS + 1, 1), np.uint8)
     # Dilated downwards: pixel y sees the obstacles in rows y - _RISE_ROWS .. y.
     below = cv2.dilate((labels == OBSTACLE).view(np.uint8), column, anchor=(0, _RISE_ROWS))
-    _set_where(labels, UNKNOWN, rising & below.view(bool) & (labels == PLANE))
+    set_where(labels, UNKNOWN, rising & below.view(bool) & (labels == PLANE))
 
 
 def _upsample(labels: np.ndarray, size: tuple[int, int]) -> np.ndarray:

@@ -1,7 +1,7 @@
 """Tests of the residual parallax from OpenCV's stereo matchers (docs/MASK.md round 12).
 
-The measurement is behind the switch ``mask._MEASUREMENT`` (default ``'one_step'``); these
-tests pin what it does when switched on, against ground truth.
+The measurement is behind the switch ``pixel_decision._MEASUREMENT`` (default
+``'one_step'``); these tests pin what it does when switched on, against ground truth.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from pathlib import Path
 
 import cv2
 from domplane_ros.config import MaskConfig
-from domplane_ros.core import mask, residual
+from domplane_ros.core import mask, pixel_decision, residual
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.tools.evaluate_mask import kitti_labels, kitti_scores, rendered_scores
 from domplane_ros.tools.evaluation.datasets import KITTI_PRIOR
@@ -54,7 +54,7 @@ def test_matcher_reads_the_residual_parallax_with_its_sign(kind):
 
 
 def _kitti_figures(measurement: str, monkeypatch) -> dict[str, float]:
-    monkeypatch.setattr(mask, '_MEASUREMENT', measurement)
+    monkeypatch.setattr(pixel_decision, '_MEASUREMENT', measurement)
     truth = kitti_labels(KITTI)
     result = mask.parallax_mask(read_gray(KITTI / 'left.png'), read_gray(KITTI / 'right.png'),
                                 truth.reference_h, CONFIG, KITTI_PRIOR.focal_px)
@@ -73,7 +73,7 @@ def test_semi_global_measurement_marks_less_of_kittis_off_road_as_plane(monkeypa
 
 
 def _gain_frame_medians(measurement: str, monkeypatch) -> dict[str, float]:
-    monkeypatch.setattr(mask, '_MEASUREMENT', measurement)
+    monkeypatch.setattr(pixel_decision, '_MEASUREMENT', measurement)
     rows = []
     for seed in range(8):  # the unit tests' frames: right camera gain 1.2, offset -15
         frame = random_scene(seed, gain=1.2, offset=-15.0, noise_std=1.0)
