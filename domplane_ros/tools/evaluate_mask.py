@@ -100,8 +100,9 @@ TITLES = {'ncc': 'ncc (before)', 'baseline': 'baseline (--baseline)',
           'parallax': 'parallax (now)', 'parallax_low': f'parallax, min height {LOW_MIN_HEIGHT}'}
 
 
-# Core modules of the mask that a baseline folder may hold beside its mask.py.
-BASELINE_MODULES = ('residual', 'occlusion', 'parallax')
+# Core modules of the mask that a baseline folder may hold beside its mask.py, in the order
+# they are loaded (pixel_decision imports residual and parallax: it is loaded after them).
+BASELINE_MODULES = ('residual', 'occlusion', 'parallax', 'pixel_decision')
 
 
 def load_baseline(path: Path) -> Callable[..., ParallaxMask]:

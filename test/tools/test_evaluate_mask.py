@@ -7,7 +7,7 @@ import shutil
 import sys
 
 import cv2
-from domplane_ros.core import mask, residual
+from domplane_ros.core import mask, pixel_decision, residual
 from domplane_ros.tools import evaluate_mask
 from domplane_ros.tools.evaluation.datasets import KITTI_PRIOR
 from domplane_ros.tools.evaluation.references import read_gray
@@ -79,6 +79,27 @@ def test_tool_writes_the_sheet_and_the_table(tmp_path):
     sheet = cv2.imread(str(out / 'mask_contact_sheet.png'))
     # Rows: one rendered scene, one indoor scene, KITTI with two homographies; 4 tiles each.
     assert sheet is not None and sheet.shape[1] == 4 * 320 and sheet.shape[0] > 4 * 90
+
+
+def test_baseline_folder_brings_its_own_pixel_decision(tmp_path):
+    # Since the split of core/mask.py, each pixel's decision and its switches are
+    # core/pixel_decision.py's: a baseline folder's copy must stand in for today's (with the
+    # folder's residual.py under it), or the baseline would measure and decide as today does.
+    folder = tmp_path / 'baseline'
+    folder.mkdir()
+    for module in (mask, residual):
+        shutil.copy(module.__file__, folder)
+    text = Path(pixel_decision.__file__).read_text(encoding='utf-8')
+    assert '\n_NOISE_AWARE = False\n' in text
+    (folder / 'pixel_decision.py').write_text(
+        text.replace('\n_NOISE_AWARE = False\n', '\n_NOISE_AWARE = True\n'), encoding='utf-8')
+    baseline = evaluate_mask.load_baseline(folder)
+    decide = baseline.__globals__['decide_pixels']
+    assert decide.__globals__['_NOISE_AWARE'] is True
+    assert decide.__globals__['local_fit'].__module__ == 'baseline_residual'
+    assert pixel_decision._NOISE_AWARE is False
+    assert sys.modules['domplane_ros.core.pixel_decision'] is pixel_decision
+    assert sys.modules['domplane_ros.core.residual'] is residual
 
 
 def test_baseline_that_is_not_a_mask_module_is_refused(tmp_path, capsys):
