@@ -49,6 +49,13 @@ RIVAL_RECHECK_UNIQUENESS = 2.25
 # 6022 published a plane one tile (151 px) off at uniqueness 1.29. 1.4 is where the confidence
 # reaches 1. Measured: docs/BENCHMARKS.md, trust round 8.
 DOUBT_UNIQUENESS = 1.4
+# ... and so does a search whose winner's verification confidence is below this (its score
+# within half of the confidence's range above verification.min_score): a look-alike of a
+# periodic floor that the search never judged the truth beside explains the pattern only in
+# part. Measured: a 16 cm tiled floor on a rough rig (tuning seed 56 of the sized floors)
+# published a plane 76 px off at score 0.265 (confidence 0.52) whose distinct rivals scored
+# 0.14; the further shifts find the truth, 0.385, and it is published 0.09 px off.
+DOUBT_CONFIDENCE = 0.75
 
 # A search in doubt that still has no verified plane refines its near misses photometrically
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
@@ -213,13 +220,15 @@ class PlaneSearch:
         uniqueness is below :data:`DOUBT_UNIQUENESS` or was never contested (no distinct plane
         of this head judged beside it, only the swapped rivals: its uniqueness was not tested;
         tuning rough rig 159 published a tiled floor's look-alike 176 px off that way, and the
-        further shifts find the truth beside it, within 1.2 x: refused as ambiguous).
+        further shifts find the truth beside it, within 1.2 x: refused as ambiguous), or whose
+        verification confidence is below :data:`DOUBT_CONFIDENCE`.
         """
         if search.peaks_tried:
             return False
         if verdict is None:
             return len(search.tried) >= limit
-        return verdict.uniqueness < DOUBT_UNIQUENESS or not verdict.contested
+        return (verdict.uniqueness < DOUBT_UNIQUENESS or not verdict.contested
+                or verdict.verification.confidence < DOUBT_CONFIDENCE)
 
     def _sibling_pick(self, step: PairStep, search: _Search, pool: list[PlaneEstimate],
                       best: PlaneEstimate,

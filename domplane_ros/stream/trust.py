@@ -53,7 +53,7 @@ from domplane_ros.core.verification import (agreement_maps, own_region, PlaneVer
                                             REASON_LOW_SUPPORT, swap_evidence,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
-from domplane_ros.stream.verdict import CHALLENGE_MARGIN, is_rival, Verdict
+from domplane_ros.stream.verdict import CHALLENGE_MARGIN, distinct_planes, is_rival, Verdict
 import numpy as np
 
 # Least disparity slope (pixels per row, roll-invariant; see swap_evidence) of a ground plane
@@ -99,6 +99,15 @@ MAX_RESIDUAL_FLOW_PX = 0.3
 # seeds (sim/boards.py, small and lens, 0-129; docs/METHOD.md).
 MIN_REGION_SCORE = 0.8
 MIN_REGION_FRACTION = 0.1
+# In ground mode the winner must also beat every distinct plane of this head by
+# CHALLENGE_MARGIN over the textured pixels both planes map inside the right image
+# (TrustGate._shared_rival): the score divides by every textured pixel, so a look-alike of
+# less disparity, which maps more of the image inside the right one, outscores the truth on a
+# floor whose pattern fills the view (measured: a 16 cm checker on a rough rig, tuning seed 48
+# of the sized floors, a plane 146 px off at 0.36 against the truth's 0.30; on the pixels both
+# see, the two explain as much). Rivals scoring under this share of the winner's are not
+# compared (each comparison costs a rival's agreement maps).
+SHARED_RIVAL_SHARE = 0.5
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -420,6 +429,9 @@ class TrustGate:
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
                               contested=any(not swapped for _, swapped in rival_scores))
             if verdict.uniqueness >= CHALLENGE_MARGIN:
+                shared = self._shared_rival(left, right, best_h, verdict, judged, roi)
+                if shared:
+                    return None, None, shared
                 return best, verdict, ''
             kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
             return None, None, (f'ambiguous: a {kind} explains the image almost as well '
@@ -433,6 +445,36 @@ class TrustGate:
             return None, None, ''
         closest = max(reasons, key=lambda v: v.score)
         return None, None, closest.reason
+
+    def _shared_rival(self, left: np.ndarray, right: np.ndarray, best_h: np.ndarray,
+                      verdict: Verdict,
+                      judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],
+                      roi: Sequence[float] | None) -> str:
+        """Return why the winner is ambiguous on the pixels it shares with a rival ('' if not).
+
+        See :data:`SHARED_RIVAL_SHARE`. Compared with every distinct ground plane of this head
+        judged on the pair that scores at least that share of the winner: the winner's
+        supporting pixels among the textured pixels both map inside the right image must be
+        at least :data:`CHALLENGE_MARGIN` times the rival's there.
+        """
+        height, width = left.shape
+        rivals = [h for _, h, v in judged
+                  if v.ground and not v.swapped and v.score >= SHARED_RIVAL_SHARE * verdict.score
+                  and distinct_planes(h, best_h, width, height)]
+        if not rivals:
+            return ''
+        config = self.config(width)
+        mine = agreement_maps(left, right, best_h, config, roi)
+        for h in rivals:
+            theirs = agreement_maps(left, right, h, config, roi)
+            both = mine.inside & theirs.inside
+            ours = int(np.count_nonzero(mine.support & both))
+            other = int(np.count_nonzero(theirs.support & both))
+            if other * CHALLENGE_MARGIN > ours:
+                return ('ambiguous: a distinct plane explains the pixels both planes see almost '
+                        f'as well ({other} against {ours} supporting pixels < '
+                        f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
+        return ''
 
     def _pick_any(self, left: np.ndarray, right: np.ndarray,
                   judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],

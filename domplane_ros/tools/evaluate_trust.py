@@ -15,6 +15,9 @@ OpenCV ORB + MAGSAC++ runs on the same pairs in the same run:
   the right camera's gain 0.8-1.25 and offset -20 to 20 grey levels, and each camera its own
   response curve (gamma 0.75-1.33) and vignetting (15-35 % darker at the corners;
   :func:`~domplane_ros.sim.rigs.camera_response`);
+* ``floors``, ``floors_rough``: periodic floors of other sizes than the renderer's defaults
+  (:data:`~domplane_ros.sim.textures.SIZED_FLOOR_KINDS`: checker squares and tiles of 16 and
+  64 cm, planks 8 and 32 cm wide, one per seed in turn), on the nominal and on a rough head;
 * ``cuts``: 8 frames of one sequence then 8 of an unrelated one (scene, floor and set-up),
   through one pipeline: the frames after the cut, and the pairs to re-lock;
 * ``tiles_faint_*``: weakly textured tiled floors of three tile sizes
@@ -42,7 +45,7 @@ from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
                                    random_rig_error, rough_rig, swapped)
-from domplane_ros.sim.textures import FAINT_TILE_KINDS
+from domplane_ros.sim.textures import FAINT_TILE_KINDS, SIZED_FLOOR_KINDS
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress
 from domplane_ros.tools.evaluation.methods import run_orb_magsac
@@ -118,6 +121,10 @@ def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
         'swapped': lambda s: swapped(random_scene(s)),
         'lighting': lambda s: camera_response(random_scene(s, gain=None, offset=None),
                                               np.random.default_rng((s, 555))),
+        'floors': lambda s: random_scene(s, floor=SIZED_FLOOR_KINDS[s % len(SIZED_FLOOR_KINDS)]),
+        'floors_rough': lambda s: rough_rig(
+            random_scene(s, floor=SIZED_FLOOR_KINDS[s % len(SIZED_FLOOR_KINDS)]),
+            random_rig_error(np.random.default_rng((s, 77)))),
     }
     tallies: dict[tuple[str, str], Tally] = {}
     for case, make in makers.items():
