@@ -82,6 +82,12 @@ class CoarseConfig:
         refine_width_px: Largest working width of the photometric refinement
             (:meth:`CoarseAligner.refine`); smaller images are refined at full resolution.
         refine_preset: DIS optical flow preset of the refinement.
+        refine_min_gradient: ``min_gradient`` of the refinement's samples. Lower than the
+            alignment's: the refinement starts near the plane, and on a faint floor the
+            samples over ``min_gradient`` are mostly those of the boxes standing on it (their
+            bottoms are at the floor's disparity), which pulled the fit off the floor (tuning
+            faint seed 230, 1.28 m tiles: from the true plane to 1.07 px at 20, 0.25 px at 8,
+            0.05 px at 4); the floor's own faint texture keeps it there.
         finish_width_px: Largest working width of the refinement that finishes a published
             plane of a search or a challenge (``refine(..., finish=True)``, up to twice) and
             of a search's near-miss rescue (up to twice for each of two planes); the other
@@ -105,6 +111,7 @@ class CoarseConfig:
     min_shift_px: float = 4.0
     refine_width_px: int = 640
     refine_preset: str = 'medium'
+    refine_min_gradient: float = 4.0
     finish_width_px: int = 1280
     shift_peaks: int = 4
     shift_strips: int = 3
@@ -125,6 +132,9 @@ class CoarseConfig:
                 raise ValueError(f'{name} must be in [32, 4096], got {getattr(self, name)}')
         if self.step_px < 1 or self.threshold_px <= 0 or self.max_forward_backward_px <= 0:
             raise ValueError('step_px, threshold_px and max_forward_backward_px must be positive')
+        if not (self.min_gradient >= 0 and self.refine_min_gradient >= 0):
+            raise ValueError('min_gradient and refine_min_gradient must be non-negative, got '
+                             f'{self.min_gradient!r}, {self.refine_min_gradient!r}')
         if not self.min_shift_px > 0:
             raise ValueError(f'min_shift_px must be positive, got {self.min_shift_px!r}')
         if not all(0.0 <= part < 1.0 for part in self.lower_parts):
@@ -357,7 +367,8 @@ class CoarseAligner:
         covered = cv2.warpPerspective(np.full_like(small_r, 255), h_small, size,
                                       flags=cv2.INTER_NEAREST | flags) > 0
         src, dst = self._samples(small_l, warped, REFINE_STEP_PX,
-                                 REFINE_MAX_FORWARD_BACKWARD_PX, self._refine_flow)
+                                 REFINE_MAX_FORWARD_BACKWARD_PX, self._refine_flow,
+                                 self.config.refine_min_gradient)
         rows, cols = src[:, 1].astype(np.intp), src[:, 0].astype(np.intp)
         near = (np.hypot(*(dst - src).T) < near_px) & covered[rows, cols]
         if np.count_nonzero(near) < REFINE_MIN_SAMPLES:
@@ -371,26 +382,28 @@ class CoarseAligner:
         return out / out[2, 2]
 
     def _samples(self, left: np.ndarray, right: np.ndarray, step: int | None = None,
-                 max_forward_backward: float | None = None, dis: Any = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 max_forward_backward: float | None = None, dis: Any = None,
+                 min_gradient: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Return (N, 2) float32 left samples and their flow targets in the right image.
 
         Samples every ``step`` pixels (default ``step_px``) whose flow agrees forward and
         backward within ``max_forward_backward`` (default ``max_forward_backward_px``), by
-        the DIS flow ``dis`` (default the alignment's).
+        the DIS flow ``dis`` (default the alignment's), where the gradient is over
+        ``min_gradient`` (default the config's).
         """
         dis = self._flow if dis is None else dis
         return self._matched(left, dis.calc(left, right, None), dis.calc(right, left, None),
-                             step, max_forward_backward)
+                             step, max_forward_backward, min_gradient)
 
     def _matched(self, left: np.ndarray, forward: np.ndarray, backward: np.ndarray,
-                 step: int | None = None, max_forward_backward: float | None = None
-                 ) -> tuple[np.ndarray, np.ndarray]:
+                 step: int | None = None, max_forward_backward: float | None = None,
+                 min_gradient: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Return :meth:`_samples` from the (H, W, 2) float32 forward and backward flows."""
         cfg = self.config
         step = cfg.step_px if step is None else step
         limit = cfg.max_forward_backward_px if max_forward_backward is None \
             else max_forward_backward
+        least = cfg.min_gradient if min_gradient is None else min_gradient
         height, width = left.shape
         ys, xs = np.mgrid[2:height - 2:step, 2:width - 2:step]
         flow = forward[ys, xs]
@@ -402,7 +415,7 @@ class CoarseAligner:
         disagreement = np.hypot(flow[:, 0] + back[:, 0], flow[:, 1] + back[:, 1])
         grad = _gradient(left)[ys, xs]
         keep = ((tx >= 0) & (tx <= width - 1) & (ty >= 0) & (ty <= height - 1)
-                & (disagreement < limit) & (grad > cfg.min_gradient))
+                & (disagreement < limit) & (grad > least))
         src = np.stack([xs[keep], ys[keep]], axis=1).astype(np.float32)
         dst = np.stack([tx[keep], ty[keep]], axis=1).astype(np.float32)
         return src, dst

@@ -181,10 +181,14 @@ class TrustGate:
         if width not in self._configs:
             working = int(min(MAX_WORKING_WIDTH, max(MIN_WORKING_WIDTH,
                                                      round(self.settings.scale * width))))
+            # Ground planes' scores weight each textured pixel by its contrast (core/
+            # verification.py, step 5); planes ``any`` (boards) keep the count they were
+            # measured with.
             self._configs[width] = VerificationConfig(
                 working_width_px=min(working, width),
                 reject_score=self.settings.min_score - 0.1,
-                accept_score=self.settings.min_score + 0.1)
+                accept_score=self.settings.min_score + 0.1,
+                weight_by_contrast=self.settings.plane != 'any')
         return self._configs[width]
 
     def reset(self) -> None:

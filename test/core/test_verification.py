@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import cv2
 from domplane_ros.config import PriorConfig
 from domplane_ros.core import prior, verification
@@ -195,12 +197,14 @@ def test_wide_sideways_probes_accept_foreshortened_floors(seed: int) -> None:
     Its sideways sharpness shows at the wider probe shift: with the narrow probes sideways
     (the peak score) these true planes score below the default min_score 0.25 (measured
     about 0.15), with the wide ones above it (about 0.37). Fails if the sideways probes
-    are narrowed.
+    are narrowed. Measured with the pixels counted (``weight_by_contrast`` off); weighted by
+    contrast, the planks' faint grain counts more and the narrow probes' score of seed 8 too
+    passes (0.27 against 0.53).
     """
     from domplane_ros.sim.generators import random_scene
     frame = random_scene(seed)
-    check = verification.verify_plane(frame.left, frame.right, frame.homography,
-                                      _gate_config(frame.left.shape[1]))
+    config = replace(_gate_config(frame.left.shape[1]), weight_by_contrast=False)
+    check = verification.verify_plane(frame.left, frame.right, frame.homography, config)
     assert check.accepted and check.score > 0.25, check
     assert check.peak_score < 0.25 <= check.score
 
@@ -256,3 +260,28 @@ def test_a_small_board_explains_its_own_region_not_the_textured_room():
                                           _translate(dx, 0.0) @ frame.homography, config,
                                           own_region=True)
         assert moved.region_score < 0.8 or moved.region_fraction < 0.1
+
+
+def test_contrast_weighting_lets_a_faint_floor_outweigh_the_boxes_on_it() -> None:
+    """Faint 1.28 m tiles with boxes (tuning faint seed 230): the boxes' strong texture.
+
+    Counted, the boxes are two thirds of the textured pixels and the true floor scores 0.19,
+    under the default ``verification.min_score`` 0.25; each pixel weighted by its inverse
+    contrast, the floor's joints and mottle count and it scores 0.29. Fails with the
+    weighting off.
+    """
+    from domplane_ros.sim.generators import random_scene
+    from domplane_ros.sim.textures import FAINT_TILE_KINDS
+    frame = random_scene(230, floor=FAINT_TILE_KINDS[230 % len(FAINT_TILE_KINDS)])
+    config = _gate_config(frame.left.shape[1])
+    assert config.weight_by_contrast
+    weighted = verification.verify_plane(frame.left, frame.right, frame.homography, config)
+    counted = verification.verify_plane(frame.left, frame.right, frame.homography,
+                                        replace(config, weight_by_contrast=False))
+    assert weighted.accepted and weighted.score >= 0.25, weighted
+    assert not counted.accepted and counted.score < 0.25, counted
+    # The weights change what counts, not which pixels support the plane.
+    assert weighted.support_fraction == counted.support_fraction
+    # A plane moved a working pixel and a half sideways in the right image is refused.
+    moved = np.array([[1.0, 0.0, 6.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ frame.homography
+    assert not verification.verify_plane(frame.left, frame.right, moved, config).accepted
