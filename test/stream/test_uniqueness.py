@@ -16,7 +16,7 @@ from domplane_ros.core.estimator import estimate_plane
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.verification import verify_plane
 from domplane_ros.sim.generators import random_scene
-from domplane_ros.sim.rigs import plane_error_px, swapped
+from domplane_ros.sim.rigs import plane_error_px, random_rig_error, rough_rig, swapped
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
@@ -48,6 +48,26 @@ def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypat
     # Without the swap's rivals a look-alike of the correctly ordered model is published.
     _wrong_without(frame, monkeypatch,
                    (search_module, 'swap_rivals', lambda *args, **kwargs: []))
+
+
+@pytest.mark.parametrize('seed, rough', [(409, False), (453, True)])
+def test_a_swapped_look_alike_with_texture_beyond_it_leaves_the_floor_unique(
+        seed, rough, monkeypatch):
+    # Fresh tuning seeds 370-489 (twelfth session): a tiled floor with nothing on it (409) and a
+    # checker with boxes (453, rough rig) whose swapped look-alike (283 and 84 px off) scored
+    # as well as the floor; the tiles' shading and the boxes lie beyond it in the swapped
+    # reading, nothing beyond the floor.
+    frame = random_scene(seed)
+    if rough:
+        frame = rough_rig(frame, random_rig_error(np.random.default_rng((seed, 77))))
+    result = _run(frame)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0
+    # The same pair with the cameras swapped: the swapped floor is the truth, nothing lies
+    # beyond it, and it is not refuted.
+    assert not _run(swapped(frame)).ok
+    monkeypatch.setattr(trust_module, 'MIN_SWAP_BEYOND', math.inf)
+    without = _run(frame)
+    assert not without.ok and 'swapped' in without.reason, without.reason
 
 
 def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
