@@ -105,6 +105,7 @@ MIN_REGION_FRACTION = 0.1
 # seeds: docs/BENCHMARKS.md, trust round 12.
 MIN_SWAP_BEYOND = 0.01
 SWAP_BEYOND_RATIO = 4.0
+MAX_WINNER_BEYOND = 0.01
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -449,9 +450,11 @@ class TrustGate:
         winner's over :data:`CHALLENGE_MARGIN`) is tested. Nothing is seen beyond the ground
         (:meth:`~domplane_ros.core.coarse.CoarseAligner.beyond_share`): a swapped floor's
         look-alike of a periodic floor leaves the texture that does not repeat (boxes, the
-        tiles' shading) beyond it in the swapped reading, the winner nothing beyond it. The
-        swapped plane is refuted when at least :data:`MIN_SWAP_BEYOND` of the texture lies
-        beyond it and :data:`SWAP_BEYOND_RATIO` times the winner's share. Real swapped
+        tiles' shading) beyond it in the swapped reading, the true floor nothing beyond it.
+        The swapped plane is refuted when at least :data:`MIN_SWAP_BEYOND` of the texture lies
+        beyond it, :data:`SWAP_BEYOND_RATIO` times the winner's share, and at most
+        :data:`MAX_WINNER_BEYOND` lies beyond the winner (a winner a few pixels off a faint
+        floor has the floor beyond it: tuning faint seed 11, 6 px off, 0.085). Real swapped
         cameras make the swapped plane the truth, with nothing beyond it: not refuted.
         """
         if not rival_verdict.swapped or rival_verdict.score * CHALLENGE_MARGIN <= verdict.score:
@@ -459,7 +462,8 @@ class TrustGate:
         theirs = self._beyond_share(left, right, rival, True)
         if theirs < MIN_SWAP_BEYOND:
             return False
-        return theirs >= SWAP_BEYOND_RATIO * self._beyond_share(left, right, best, False)
+        mine = self._beyond_share(left, right, best, False)
+        return mine <= MAX_WINNER_BEYOND and theirs >= SWAP_BEYOND_RATIO * mine
 
     def _beyond_share(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                       swapped: bool) -> float:
