@@ -49,6 +49,11 @@ REFINE_NEAR_PX = 2.0
 REFINE_THRESHOLD_PX = 0.3
 REFINE_MIN_SAMPLES = 50
 
+# The residual parallax test of a plane (CoarseAligner.beyond_share), at the alignment's working
+# width: a flow sample lies *beyond* the plane when its residual flow after warping by the plane
+# points the way of less disparity by more than BEYOND_PX pixels (at the working width).
+BEYOND_PX = 1.0
+
 # Images smaller than this on either side (at the working width) give no plane: the flow needs
 # a few pyramid levels of its patches (OpenCV's DIS refuses images under 12 px).
 MIN_SIZE_PX = 32
@@ -380,6 +385,55 @@ class CoarseAligner:
         if not np.all(np.isfinite(out)) or abs(out[2, 2]) < 1e-12:
             return None
         return out / out[2, 2]
+
+    def beyond_share(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                     swapped: bool = False) -> float:
+        """Return the share of the textured flow samples that lie beyond the plane.
+
+        Nothing is seen beyond the ground: every point of the scene stands on it or above it,
+        nearer the head along its ray, so its disparity is at least the plane's. The right
+        image is warped into the left view by ``homography`` and aligned to the left image by
+        DIS flow at ``width_px``; a sample (every :data:`REFINE_STEP_PX` pixels, textured,
+        forward and backward flow agreeing within ``max_forward_backward_px``, inside the
+        warp) lies beyond the plane when its residual flow points by more than
+        :data:`BEYOND_PX` the way of less disparity: right for a correctly ordered head
+        (the right camera sees nearer points further left), left for ``swapped`` cameras (the
+        plane is read as one of swapped cameras, whose disparity has the other sign). A
+        periodic floor's look-alike of the other hypothesis matches the floor's repeats but
+        not what is not periodic (the boxes, the tiles' shading), and that residual lies beyond
+        it. The test is local: parallax beyond the flow's reach is not measured.
+
+        Args:
+            left: (H, W) uint8 left image.
+            right: (H, W) uint8 right image (the same size).
+            homography: (3, 3) float64 left-to-right plane homography.
+            swapped: Read the plane as one of swapped cameras.
+
+        Returns:
+            The share in [0, 1]; 0 when no sample is kept or the images are smaller than
+            :data:`MIN_SIZE_PX`.
+
+        Raises:
+            ValueError: If the images are not 2-D uint8 arrays of the same size.
+
+        """
+        small_l, small_r, scale = _working_pair(left, right, self.config.width_px)
+        if min(small_l.shape) < MIN_SIZE_PX:
+            return 0.0
+        h_small = (np.diag([scale, scale, 1.0]) @ np.asarray(homography, np.float64)
+                   @ np.diag([1.0 / scale, 1.0 / scale, 1.0]))
+        size = (small_l.shape[1], small_l.shape[0])
+        flags = cv2.WARP_INVERSE_MAP
+        warped = cv2.warpPerspective(small_r, h_small, size, flags=cv2.INTER_LINEAR | flags,
+                                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        covered = cv2.warpPerspective(np.full_like(small_r, 255), h_small, size,
+                                      flags=cv2.INTER_NEAREST | flags) > 0
+        src, dst = self._samples(small_l, warped, REFINE_STEP_PX)
+        inside = covered[src[:, 1].astype(np.intp), src[:, 0].astype(np.intp)]
+        if not np.any(inside):
+            return 0.0
+        residual = (dst[inside, 0] - src[inside, 0]) * (-1.0 if swapped else 1.0)
+        return float(np.count_nonzero(residual > BEYOND_PX) / residual.size)
 
     def _samples(self, left: np.ndarray, right: np.ndarray, step: int | None = None,
                  max_forward_backward: float | None = None, dis: Any = None,

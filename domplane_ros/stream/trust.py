@@ -108,6 +108,13 @@ MIN_REGION_FRACTION = 0.1
 # see, the two explain as much). Rivals scoring under this share of the winner's are not
 # compared (each comparison costs a rival's agreement maps).
 SHARED_RIVAL_SHARE = 0.5
+# A plane of swapped cameras that would make a search's winner ambiguous is refuted when at
+# least MIN_SWAP_BEYOND of the textured flow samples lie beyond it in the swapped reading, and
+# SWAP_BEYOND_RATIO times the winner's share (TrustGate._swap_refuted). Measured on tuning
+# seeds: docs/BENCHMARKS.md, trust round 12.
+MIN_SWAP_BEYOND = 0.01
+SWAP_BEYOND_RATIO = 4.0
+MAX_WINNER_BEYOND = 0.01
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -428,7 +435,8 @@ class TrustGate:
                 return self._pick_any(left, right, judged, verified, roi)
             best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
             rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                            if is_rival(v, h, best_h, width, height)]
+                            if is_rival(v, h, best_h, width, height)
+                            and not self._swap_refuted(left, right, best_h, verdict, h, v)]
             top, top_swapped = max(rival_scores, default=(0.0, False))
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
                               contested=any(not swapped for _, swapped in rival_scores))
@@ -479,6 +487,41 @@ class TrustGate:
                         f'as well ({other} against {ours} supporting pixels < '
                         f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
         return ''
+
+    def _swap_refuted(self, left: np.ndarray, right: np.ndarray, best: np.ndarray,
+                      verdict: Verdict, rival: np.ndarray, rival_verdict: Verdict) -> bool:
+        """Return whether a plane of swapped cameras is refuted by its residual parallax.
+
+        Only a swapped plane that would make the winner ambiguous (a score above the
+        winner's over :data:`CHALLENGE_MARGIN`) is tested. Nothing is seen beyond the ground
+        (:meth:`~domplane_ros.core.coarse.CoarseAligner.beyond_share`): a swapped floor's
+        look-alike of a periodic floor leaves the texture that does not repeat (boxes, the
+        tiles' shading) beyond it in the swapped reading, the true floor nothing beyond it.
+        The swapped plane is refuted when at least :data:`MIN_SWAP_BEYOND` of the texture lies
+        beyond it, :data:`SWAP_BEYOND_RATIO` times the winner's share, and at most
+        :data:`MAX_WINNER_BEYOND` lies beyond the winner (a winner a few pixels off a faint
+        floor has the floor beyond it: tuning faint seed 11, 6 px off, 0.085). Real swapped
+        cameras make the swapped plane the truth, with nothing beyond it: not refuted.
+        """
+        if not rival_verdict.swapped or rival_verdict.score * CHALLENGE_MARGIN <= verdict.score:
+            return False
+        theirs = self._beyond_share(left, right, rival, True)
+        if theirs < MIN_SWAP_BEYOND:
+            return False
+        mine = self._beyond_share(left, right, best, False)
+        return mine <= MAX_WINNER_BEYOND and theirs >= SWAP_BEYOND_RATIO * mine
+
+    def _beyond_share(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+                      swapped: bool) -> float:
+        """Return :meth:`CoarseAligner.beyond_share`, once per plane and pair."""
+        key = ('beyond', np.asarray(homography, np.float64).tobytes(), swapped)
+        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
+        if same and key in self._coarse_planes:
+            return float(self._coarse_planes[key])
+        share = self._coarse.beyond_share(left, right, homography, swapped)
+        if same:
+            self._coarse_planes[key] = np.array(share)
+        return share
 
     def _pick_any(self, left: np.ndarray, right: np.ndarray,
                   judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],

@@ -196,3 +196,20 @@ def test_the_plain_alignment_in_steps_gives_the_same_planes_bit_for_bit():
             aligner.candidates(other.left, other.right)
     assert ran == 1 and whole.shape[0] >= 1
     np.testing.assert_array_equal(done.value.value, whole)
+
+
+@pytest.mark.parametrize('seed', [0, 5])
+def test_nothing_lies_beyond_the_true_floor_and_the_sign_says_which_way(seed):
+    # A checker with boxes (0) and a random texture (5): the floor lies beyond a plane of more
+    # disparity (moved left in the right image), and beyond a plane of less disparity read as
+    # one of swapped cameras; nothing lies beyond the truth.
+    frame = random_scene(seed)
+    aligner = CoarseAligner()
+
+    def moved(dx):
+        return np.array([[1.0, 0.0, dx], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ frame.homography
+
+    assert aligner.beyond_share(frame.left, frame.right, frame.homography) < 0.005
+    assert aligner.beyond_share(frame.left, frame.right, moved(-4.0)) > 0.5
+    assert aligner.beyond_share(frame.left, frame.right, moved(4.0)) < 0.005
+    assert aligner.beyond_share(frame.left, frame.right, moved(4.0), swapped=True) > 0.5

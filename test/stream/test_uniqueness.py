@@ -61,6 +61,26 @@ def test_a_look_alike_that_sees_more_of_the_image_is_not_published(monkeypatch):
     _wrong_without(frame, monkeypatch, (trust_module, 'SHARED_RIVAL_SHARE', math.inf))
 
 
+@pytest.mark.parametrize('seed, rough', [(409, False), (453, True)])
+def test_a_swapped_look_alike_with_texture_beyond_it_leaves_the_floor_unique(
+        seed, rough, monkeypatch):
+    # Fresh tuning seeds 370-489 (twelfth session): a tiled floor with nothing on it (409) and a
+    # checker with boxes (453, rough rig) whose swapped look-alike (283 and 84 px off) scored
+    # as well as the floor; the tiles' shading and the boxes lie beyond it in the swapped
+    # reading, nothing beyond the floor.
+    frame = random_scene(seed)
+    if rough:
+        frame = rough_rig(frame, random_rig_error(np.random.default_rng((seed, 77))))
+    result = _run(frame)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0
+    # The same pair with the cameras swapped: the swapped floor is the truth, nothing lies
+    # beyond it, and it is not refuted.
+    assert not _run(swapped(frame)).ok
+    monkeypatch.setattr(trust_module, 'MIN_SWAP_BEYOND', math.inf)
+    without = _run(frame)
+    assert not without.ok and 'swapped' in without.reason, without.reason
+
+
 def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
     # Checker (seed 0): the swapped floor maps within 8 px of a look-alike 9 px off it.
     frame = swapped(random_scene(0))
