@@ -109,9 +109,11 @@ MIN_REGION_FRACTION = 0.1
 # compared (each comparison costs a rival's agreement maps).
 SHARED_RIVAL_SHARE = 0.5
 # A plane of swapped cameras that would make a search's winner ambiguous is refuted when at
-# least MIN_SWAP_BEYOND of the textured flow samples lie beyond it in the swapped reading, and
-# SWAP_BEYOND_RATIO times the winner's share (TrustGate._swap_refuted). Measured on tuning
-# seeds: docs/BENCHMARKS.md, trust round 12.
+# least MIN_SWAP_BEYOND of the textured flow samples lie beyond it in the swapped reading,
+# SWAP_BEYOND_RATIO times the winner's share, and at most MAX_WINNER_BEYOND lie beyond the
+# winner (TrustGate._swap_refuted). Measured on tuning seeds: docs/BENCHMARKS.md, trust round
+# 12 (true floors at most 0.004, swapped cameras' floors read as swapped at most 0.013, swapped
+# look-alikes on correctly ordered pairs at least 0.018).
 MIN_SWAP_BEYOND = 0.01
 SWAP_BEYOND_RATIO = 4.0
 MAX_WINNER_BEYOND = 0.01

@@ -280,3 +280,17 @@ def test_a_winner_the_corners_cannot_finish_is_still_refined_photometrically():
     result = pipeline.process(frame.left, frame.right, 0)
     assert result.ok, result.reason
     assert plane_error_px(frame, result.homography) < 1.0
+
+
+def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(monkeypatch):
+    # Tuning faint seed 11 (1.28 m tiles, features.kind both): the winner, 6.1 px off the
+    # floor, has 8.5 % of the texture beyond it, its swapped rival 54 %. Refuting the rival
+    # on the ratio alone published the winner (evaluate_trust, twelfth session); the winner
+    # must itself have (almost) nothing beyond it.
+    frame, pipeline = _faint_both(11)
+    result = pipeline.process(frame.left, frame.right, 0)
+    assert not result.ok and 'swapped' in result.reason, result.reason
+    monkeypatch.setattr(trust_module, 'MAX_WINNER_BEYOND', math.inf)
+    frame, pipeline = _faint_both(11)
+    without = pipeline.process(frame.left, frame.right, 0)
+    assert without.ok and plane_error_px(frame, without.homography) > 5.0
