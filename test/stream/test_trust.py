@@ -50,7 +50,6 @@ def counted_score(monkeypatch):
     monkeypatch.setattr(trust_module.TrustGate, 'config', counted)
 
 
-
 @pytest.fixture(scope='module')
 def scene():
     return random_scene(3)

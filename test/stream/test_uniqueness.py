@@ -43,7 +43,6 @@ def counted_score(monkeypatch):
     monkeypatch.setattr(trust_module.TrustGate, 'config', counted)
 
 
-
 def _run(frame):
     return PlanePipeline().process(frame.left, frame.right, 0)
 
