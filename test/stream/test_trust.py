@@ -33,23 +33,6 @@ import pytest
 PERIOD_NS = 33_333_333
 
 
-@pytest.fixture
-def counted_score(monkeypatch):
-    """Score pixels counted, not weighted by contrast: the scenes below were chosen so.
-
-    Their checks (swap, doubt, rescue, bottom, beyond) were measured on planes the counted
-    score verified; weighted by contrast (core/verification.py, step 5; the default since
-    the twelfth round) those planes are refused earlier or the truth wins outright, and the
-    check would go untested.
-    """
-    original = trust_module.TrustGate.config
-
-    def counted(self, width):
-        return replace(original(self, width), weight_by_contrast=False)
-
-    monkeypatch.setattr(trust_module.TrustGate, 'config', counted)
-
-
 @pytest.fixture(scope='module')
 def scene():
     return random_scene(3)
