@@ -45,7 +45,8 @@ Method (all at a working width of :attr:`VerificationConfig.working_width_px`):
 The **confidence** maps the score linearly onto [0, 1] between
 :attr:`VerificationConfig.reject_score` (0.10, confidence 0) and
 :attr:`VerificationConfig.accept_score` (0.30, confidence 1); a plane is accepted at
-confidence 0.5 or more, i.e. a score of 0.20. Measured on the tuning seeds 0-199 (rendered,
+confidence 0.5 or more, i.e. a score of 0.20. Measured with the pixels counted (before
+``weight_by_contrast``) on the tuning seeds 0-199 (rendered,
 random gain and offset): no wrong plane other than an exact floor-period look-alike scored
 above 0.17 (shifted 5-80 px, a cut, a prior candidate, a swapped-pair plane), 90 % of the true
 planes scored above 0.20 (median 0.46); 57 of 620 exact period look-alikes scored above 0.20

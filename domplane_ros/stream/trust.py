@@ -468,8 +468,9 @@ class TrustGate:
 
         See :data:`SHARED_RIVAL_SHARE`. Compared with every distinct ground plane of this head
         judged on the pair that scores at least that share of the winner: the winner's
-        supporting pixels among the textured pixels both map inside the right image must be
-        at least :data:`CHALLENGE_MARGIN` times the rival's there.
+        supporting pixels among the textured pixels both map inside the right image, each
+        counted as in the score, must be at least :data:`CHALLENGE_MARGIN` times the rival's
+        there.
         """
         height, width = left.shape
         rivals = [h for _, h, v in judged
@@ -482,12 +483,13 @@ class TrustGate:
         for h in rivals:
             theirs = agreement_maps(left, right, h, config, roi)
             both = mine.inside & theirs.inside
-            ours = int(np.count_nonzero(mine.support & both))
-            other = int(np.count_nonzero(theirs.support & both))
+            # Each pixel counts as in the score (core/verification.py, step 5).
+            ours = float(mine.weight[mine.support & both].sum(dtype=np.float64))
+            other = float(theirs.weight[theirs.support & both].sum(dtype=np.float64))
             if other * CHALLENGE_MARGIN > ours:
                 return ('ambiguous: a distinct plane explains the pixels both planes see almost '
-                        f'as well ({other} against {ours} supporting pixels < '
-                        f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
+                        f'as well ({other / max(ours, 1e-9):.2f} of the winner\'s support there '
+                        f'> 1 / {CHALLENGE_MARGIN:g}; a periodic floor?)')
         return ''
 
     def _swap_refuted(self, left: np.ndarray, right: np.ndarray, best: np.ndarray,

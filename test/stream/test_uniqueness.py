@@ -39,7 +39,7 @@ def _wrong_without(frame, monkeypatch, *patches):
 
 
 @pytest.mark.parametrize('seed', [68, 115])
-def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypatch):
+def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypatch, counted_score):
     # Tiles (68) and a checker of few corners (115: its swapped floor polished, not refined).
     frame = swapped(random_scene(seed))
     result = _run(frame)
@@ -52,10 +52,16 @@ def test_swapped_periodic_floor_is_not_published_as_a_look_alike(seed, monkeypat
 
 def test_a_look_alike_that_sees_more_of_the_image_is_not_published(monkeypatch):
     # A 16 cm checker filling the view of a rough rig (tuning seed 48 of the sized floors):
-    # a plane 146 px off, of less disparity, maps more of the image inside the right one and
-    # outscores the truth (0.36 against 0.30); on the pixels both see they explain as much.
+    # with pixels counted, a plane 146 px off, of less disparity, maps more of the image
+    # inside the right one and outscores the truth (0.36 against 0.30); on the pixels both
+    # see they explain as much. Weighted by contrast (the default) the truth wins outright.
     frame = rough_rig(random_scene(48, floor='checker_32'),
                       random_rig_error(np.random.default_rng((48, 77))))
+    default = _run(frame)
+    assert default.ok and plane_error_px(frame, default.homography) < 1.0, default.reason
+    original = trust_module.TrustGate.config
+    monkeypatch.setattr(trust_module.TrustGate, 'config', lambda self, width: replace(
+        original(self, width), weight_by_contrast=False))
     result = _run(frame)
     assert not result.ok and 'both planes see' in result.reason, result.reason
     _wrong_without(frame, monkeypatch, (trust_module, 'SHARED_RIVAL_SHARE', math.inf))
@@ -94,7 +100,7 @@ def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
                    (trust_module, 'MAX_BELOW_FRACTION', 1.0))
 
 
-def test_a_plane_through_boxes_is_not_the_ground(monkeypatch):
+def test_a_plane_through_boxes_is_not_the_ground(monkeypatch, counted_score):
     frame = swapped(random_scene(61))
     result = _run(frame)
     assert not result.ok and 'not the ground' in result.reason, result.reason
@@ -213,7 +219,7 @@ def _faint_both(seed):
     # for its score.
     (212, 'MIN_BOTTOM_SHARE', 0.0),
 ])
-def test_a_plane_above_the_floor_is_not_the_ground(seed, name, off, monkeypatch):
+def test_a_plane_above_the_floor_is_not_the_ground(seed, name, off, monkeypatch, counted_score):
     # The plain coarse alignment only: on seed 305 the shifted one adds a plane 4 px off the
     # floor that outranks the plane through the boxes, which would hide the check's part.
     plain = CoarseAligner.candidates

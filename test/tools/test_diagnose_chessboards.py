@@ -25,10 +25,14 @@ def test_board_truth_is_refused_as_swapped_and_look_alikes_score_far_below(tmp_p
         slope = float(line.split('truth slope ')[1].split()[0])
         assert slope < -0.02, line
         assert 'refused: swapped?' in line
-        # The periodic look-alike one square off is no danger to the verification.
+        # The periodic look-alike one square off is no danger to the verification. (Judged
+        # as a ground plane, whose score weights each pixel by its inverse contrast since the
+        # twelfth round: the board's strong squares count less, 0.17 counted -> 0.06-0.07;
+        # the board target runs with verification.plane any, which counts, as the xfail of
+        # test_evaluate says.)
         score = float(line.split(' score ')[1].split()[0])
         look = float(line.split('one square off ')[1].split(';')[0])
-        assert score > 0.1 and look < score / 5, line
+        assert score > 0.05 and look < score / 5, line
         assert 'product refused' in line  # no wrong plane published
     sheet = cv2.imread(str(tmp_path / 'chessboards.jpg'))
     assert sheet.shape == (240, 5 * 320, 3)
