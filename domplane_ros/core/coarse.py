@@ -365,12 +365,7 @@ class CoarseAligner:
         to_small = np.diag([scale, scale, 1.0])
         to_full = np.diag([1.0 / scale, 1.0 / scale, 1.0])
         h_small = to_small @ np.asarray(homography, np.float64) @ to_full
-        size = (small_l.shape[1], small_l.shape[0])
-        flags = cv2.WARP_INVERSE_MAP
-        warped = cv2.warpPerspective(small_r, h_small, size, flags=cv2.INTER_LINEAR | flags,
-                                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        covered = cv2.warpPerspective(np.full_like(small_r, 255), h_small, size,
-                                      flags=cv2.INTER_NEAREST | flags) > 0
+        warped, covered = _warped_into_left(small_l, small_r, h_small)
         src, dst = self._samples(small_l, warped, REFINE_STEP_PX,
                                  REFINE_MAX_FORWARD_BACKWARD_PX, self._refine_flow,
                                  self.config.refine_min_gradient)
@@ -422,12 +417,7 @@ class CoarseAligner:
             return 0.0
         h_small = (np.diag([scale, scale, 1.0]) @ np.asarray(homography, np.float64)
                    @ np.diag([1.0 / scale, 1.0 / scale, 1.0]))
-        size = (small_l.shape[1], small_l.shape[0])
-        flags = cv2.WARP_INVERSE_MAP
-        warped = cv2.warpPerspective(small_r, h_small, size, flags=cv2.INTER_LINEAR | flags,
-                                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-        covered = cv2.warpPerspective(np.full_like(small_r, 255), h_small, size,
-                                      flags=cv2.INTER_NEAREST | flags) > 0
+        warped, covered = _warped_into_left(small_l, small_r, h_small)
         src, dst = self._samples(small_l, warped, REFINE_STEP_PX)
         inside = covered[src[:, 1].astype(np.intp), src[:, 0].astype(np.intp)]
         if not np.any(inside):
@@ -481,6 +471,18 @@ def _check_pair(left: np.ndarray, right: np.ndarray) -> None:
             or right.dtype != np.uint8):
         raise ValueError('left and right must be 2-D uint8 images of the same size, got '
                          f'{left.shape} {left.dtype} and {right.shape} {right.dtype}')
+
+
+def _warped_into_left(small_l: np.ndarray, small_r: np.ndarray, h_small: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """Return the right image warped into the left view by ``h_small`` and where it covers."""
+    size = (small_l.shape[1], small_l.shape[0])
+    flags = cv2.WARP_INVERSE_MAP
+    warped = cv2.warpPerspective(small_r, h_small, size, flags=cv2.INTER_LINEAR | flags,
+                                 borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    covered = cv2.warpPerspective(np.full_like(small_r, 255), h_small, size,
+                                  flags=cv2.INTER_NEAREST | flags) > 0
+    return warped, covered
 
 
 def _working_pair(left: np.ndarray, right: np.ndarray, width_px: int

@@ -487,9 +487,10 @@ class TrustGate:
             ours = float(mine.weight[mine.support & both].sum(dtype=np.float64))
             other = float(theirs.weight[theirs.support & both].sum(dtype=np.float64))
             if other * CHALLENGE_MARGIN > ours:
+                share = other / max(ours, 1e-9)
                 return ('ambiguous: a distinct plane explains the pixels both planes see almost '
-                        f'as well ({other / max(ours, 1e-9):.2f} of the winner\'s support there '
-                        f'> 1 / {CHALLENGE_MARGIN:g}; a periodic floor?)')
+                        f'as well ({share:.2f} of the support of the winner there > 1 / '
+                        f'{CHALLENGE_MARGIN:g}; a periodic floor?)')
         return ''
 
     def _swap_refuted(self, left: np.ndarray, right: np.ndarray, best: np.ndarray,
