@@ -269,7 +269,7 @@ def test_a_plane_sloping_the_swapped_way_is_a_swap_only_if_it_fills_the_bottom(
     assert ('not the ground' in verdict.reason) is not swapped_expected, verdict.reason
 
 
-def test_faint_large_tiles_give_the_floor_not_a_plane_five_pixels_off():
+def test_faint_large_tiles_give_the_floor_not_a_plane_five_pixels_off(monkeypatch):
     # Tuning faint seed 230 with features.kind both, as evaluate_trust's faint cases. Before
     # the twelfth round (docs/BENCHMARKS.md, trust round 12) the truth scored 0.19 (counted
     # pixels, < verification.min_score), the search's fits of the floor lay 2.0-5.2 px off,
@@ -278,6 +278,14 @@ def test_faint_large_tiles_give_the_floor_not_a_plane_five_pixels_off():
     # that plane 0.24 (refused); the photometric refinement, sampling the faint floor, brings
     # the fits to the floor. Fails with either off (weight_by_contrast: the 2 px fits are
     # refused, nothing published; refine_min_gradient 20: refined toward the boxes).
+    # Since the shared-pixels comparison (stream/trust.py SHARED_RIVAL_SHARE, same session) a
+    # distinct plane explains 0.90 of the floor's support on the pixels both see, so the
+    # default refuses the pair as ambiguous: no plane over 5 px either way; the floor is
+    # published without that comparison.
+    frame, pipeline = _faint_both(230)
+    result = pipeline.process(frame.left, frame.right, 0)
+    assert not result.ok or plane_error_px(frame, result.homography) < 1.0, result.reason
+    monkeypatch.setattr(trust_module, 'SHARED_RIVAL_SHARE', math.inf)
     frame, pipeline = _faint_both(230)
     result = pipeline.process(frame.left, frame.right, 0)
     assert result.ok, result.reason
@@ -295,8 +303,10 @@ def test_a_winner_the_corners_cannot_finish_is_still_refined_photometrically():
     assert plane_error_px(frame, result.homography) < 1.0
 
 
-def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(monkeypatch):
-    # Tuning faint seed 11 (1.28 m tiles, features.kind both): the winner, 6.1 px off the
+def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(
+        monkeypatch, counted_score):
+    # Tuning faint seed 11 (1.28 m tiles, features.kind both; pixels counted in the score, as
+    # when it was found: weighted, the floor is published 0.46 px off): the winner, 6.1 px off the
     # floor, has 8.5 % of the texture beyond it, its swapped rival 54 %. Refuting the rival
     # on the ratio alone published the winner (evaluate_trust, twelfth session); the winner
     # must itself have (almost) nothing beyond it.
@@ -306,4 +316,6 @@ def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(mo
     monkeypatch.setattr(trust_module, 'MAX_WINNER_BEYOND', math.inf)
     frame, pipeline = _faint_both(11)
     without = pipeline.process(frame.left, frame.right, 0)
-    assert without.ok and plane_error_px(frame, without.homography) > 5.0
+    # 3.5 px off since the refinement samples the faint floor (round 12; 6.1 px before it):
+    # still not the floor.
+    assert without.ok and plane_error_px(frame, without.homography) > 2.0
