@@ -22,7 +22,7 @@ from domplane_ros.core.homography import as_homography, corner_distance_px
 from domplane_ros.core.prior import PriorSearch, search_candidates
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
-from domplane_ros.core.verification import REASON_LOW_SUPPORT
+from domplane_ros.core.verification import REASON_LOW_SUPPORT, swap_evidence
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, photometric_estimate
 from domplane_ros.stream.challenge import NEAR_LOCK_PX
@@ -56,6 +56,14 @@ DOUBT_UNIQUENESS = 1.4
 # published a plane 76 px off at score 0.265 (confidence 0.52) whose distinct rivals scored
 # 0.14; the further shifts find the truth, 0.385, and it is published 0.09 px off.
 DOUBT_CONFIDENCE = 0.75
+# ... and so does a search whose winner's disparity grows toward the image bottom by less than
+# this many pixels per row (core/verification.swap_evidence; a ground plane's slope is about
+# the baseline over the camera height times the cosine of the tilt: at least 0.032 within the
+# default prior, most far above): a nearly fronto-parallel plane through a far wall that passes
+# the ground checks. Measured: rough rig 10022 on 16 cm tiles (a held-out seed, looked at after
+# its run) published a plane 104 px off at slope 0.025 and confidence 1.0, the floor (slope
+# 0.20, score 0.63) never a candidate; the further shifts find it.
+DOUBT_SLOPE = 0.05
 
 # A search in doubt that still has no verified plane refines its near misses photometrically
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
@@ -179,7 +187,8 @@ class PlaneSearch:
         roi = self._config().features.roi
         pick = lambda: self._trust().pick(step.left, step.right, pool, roi, rivals)  # noqa: E731
         best, verdict, unverified = self._checked_pick(search, pick)
-        if self._in_doubt(search, verdict, limit):
+        if self._in_doubt(search, verdict, limit, None if best is None else best.homography,
+                          size):
             # A search in doubt (no verified plane, or a winner not far ahead of another
             # plane): the coarse alignment after its further shifts, judged with the rest.
             search.peaks_tried = True
@@ -213,7 +222,9 @@ class PlaneSearch:
         self._end(step, pool, rejection, unverified)
         return None
 
-    def _in_doubt(self, search: _Search, verdict: Verdict | None, limit: int) -> bool:
+    def _in_doubt(self, search: _Search, verdict: Verdict | None, limit: int,
+                  homography: np.ndarray | None = None,
+                  size: tuple[int, int] = (0, 0)) -> bool:
         """Return whether the search should try the coarse alignment's further shifts.
 
         Once per search: where its last pair found no verified plane, or a plane whose
@@ -221,14 +232,18 @@ class PlaneSearch:
         of this head judged beside it, only the swapped rivals: its uniqueness was not tested;
         tuning rough rig 159 published a tiled floor's look-alike 176 px off that way, and the
         further shifts find the truth beside it, within 1.2 x: refused as ambiguous), or whose
-        verification confidence is below :data:`DOUBT_CONFIDENCE`.
+        verification confidence is below :data:`DOUBT_CONFIDENCE`, or whose ``homography``
+        (the winner's, on an image of ``size`` = (width, height)) has a disparity slope under
+        :data:`DOUBT_SLOPE`.
         """
         if search.peaks_tried:
             return False
         if verdict is None:
             return len(search.tried) >= limit
+        shallow = homography is not None and swap_evidence(
+            homography, *size).disparity_slope < DOUBT_SLOPE
         return (verdict.uniqueness < DOUBT_UNIQUENESS or not verdict.contested
-                or verdict.verification.confidence < DOUBT_CONFIDENCE)
+                or verdict.verification.confidence < DOUBT_CONFIDENCE or shallow)
 
     def _sibling_pick(self, step: PairStep, search: _Search, pool: list[PlaneEstimate],
                       best: PlaneEstimate,

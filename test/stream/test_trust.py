@@ -534,6 +534,20 @@ def test_a_winner_of_low_confidence_sends_the_search_into_doubt(monkeypatch, cou
     assert without.ok and plane_error_px(frame, without.homography) > 50.0
 
 
+def test_a_winner_of_shallow_slope_sends_the_search_into_doubt(monkeypatch):
+    # A rough rig on 16 cm tiles (seed 10022 of the sized floors, held out until its run):
+    # the search never gets near the floor (slope 0.20 px per row, score 0.63) and its winner,
+    # 104 px off, barely slopes (0.025) at confidence 1.0. In doubt, the coarse alignment's
+    # further shifts find the floor.
+    frame = rough_rig(random_scene(10022, floor='tiles_32'),
+                      random_rig_error(np.random.default_rng((10022, 77))))
+    result = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
+    monkeypatch.setattr(search_module, 'DOUBT_SLOPE', 0.0)
+    without = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
+    assert without.ok and plane_error_px(frame, without.homography) > 50.0
+
+
 def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch, counted_score):
     # A rough rig (tuning seed 12) whose best plane converges 1.1 px off the floor and then
     # explains 0.23 of the image, under verification.min_score 0.25 (the floor itself: 0.27):
@@ -608,6 +622,11 @@ def test_a_search_is_in_doubt_once_without_a_verified_plane_or_under_the_uniquen
         confidence=low - 0.01)), 2)
     assert not search._in_doubt(state, verdict(doubt, verification=SimpleNamespace(
         confidence=low)), 2)
+    # A winner whose disparity barely grows toward the bottom (a far wall's plane).
+    flat = np.array([[1.0, 0.0, -20.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    ground = np.array([[1.0, -0.2, 20.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    assert search._in_doubt(state, verdict(doubt), 2, flat, (640, 480))
+    assert not search._in_doubt(state, verdict(doubt), 2, ground, (640, 480))
     assert search._in_doubt(state, None, 2)  # the search's last pair
     assert not search._in_doubt(state, None, 3)  # more pairs to come
     state.peaks_tried = True
