@@ -524,19 +524,24 @@ def test_a_winner_never_contested_sends_the_search_into_doubt(monkeypatch):
     assert without.ok and plane_error_px(frame, without.homography) > 100.0
 
 
+def _floor_found_only_in_doubt(seed: int, trigger: str, monkeypatch) -> None:
+    """Rough rig `seed` on 16 cm tiles: floor within 1 px; > 50 px off without `trigger`."""
+    frame = rough_rig(random_scene(seed, floor='tiles_32'),
+                      random_rig_error(np.random.default_rng((seed, 77))))
+    result = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
+    monkeypatch.setattr(search_module, trigger, 0.0)
+    without = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
+    assert without.ok and plane_error_px(frame, without.homography) > 50.0
+
+
 def test_a_winner_of_low_confidence_sends_the_search_into_doubt(monkeypatch, counted_score):
     # A rough rig on 16 cm tiles (tuning seed 56 of the sized floors), pixels counted in the
     # score: the search never gets near the floor and its winner, a look-alike 76 px off,
     # explains 0.265 of the image (verification confidence 0.58) against 0.14 for its
     # distinct rivals. In doubt, the coarse alignment's further shifts find the floor (0.385),
     # which is published. (Weighted by contrast, the default, the floor wins without doubt.)
-    frame = rough_rig(random_scene(56, floor='tiles_32'),
-                      random_rig_error(np.random.default_rng((56, 77))))
-    result = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
-    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
-    monkeypatch.setattr(search_module, 'DOUBT_CONFIDENCE', 0.0)
-    without = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
-    assert without.ok and plane_error_px(frame, without.homography) > 50.0
+    _floor_found_only_in_doubt(56, 'DOUBT_CONFIDENCE', monkeypatch)
 
 
 def test_a_winner_of_shallow_slope_sends_the_search_into_doubt(monkeypatch):
@@ -544,13 +549,7 @@ def test_a_winner_of_shallow_slope_sends_the_search_into_doubt(monkeypatch):
     # the search never gets near the floor (slope 0.20 px per row, score 0.63) and its winner,
     # 104 px off, barely slopes (0.025) at confidence 1.0. In doubt, the coarse alignment's
     # further shifts find the floor.
-    frame = rough_rig(random_scene(10022, floor='tiles_32'),
-                      random_rig_error(np.random.default_rng((10022, 77))))
-    result = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
-    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
-    monkeypatch.setattr(search_module, 'DOUBT_SLOPE', 0.0)
-    without = PlanePipeline(PlaneNodeConfig()).process(frame.left, frame.right, 0)
-    assert without.ok and plane_error_px(frame, without.homography) > 50.0
+    _floor_found_only_in_doubt(10022, 'DOUBT_SLOPE', monkeypatch)
 
 
 def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch, counted_score):
