@@ -68,7 +68,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 import math
 import time
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import cv2
 from domplane_ros.core.features import check_roi
@@ -155,6 +155,43 @@ class VerificationConfig:
                              f'{self.reject_score!r}, {self.accept_score!r}')
 
 
+class _Later:
+    """A float measured when first read (the peak score), then kept; pickled as the float."""
+
+    __slots__ = ('_measure', '_value')
+
+    def __init__(self, measure: Callable[[], float]) -> None:
+        """Keep the measurement, not run yet."""
+        self._measure: Callable[[], float] | None = measure
+        self._value = 0.0
+
+    def value(self) -> float:
+        """Return the value, measured on the first call (its working arrays then let go)."""
+        if self._measure is not None:
+            self._value, self._measure = float(self._measure()), None
+        return self._value
+
+    def __reduce__(self) -> tuple[Any, tuple[float]]:
+        """Pickle as the plain float."""
+        return float, (self.value(),)
+
+
+class _MeasuredWhenRead:
+    """A float field of a frozen dataclass that may hold a :class:`_Later` (default 0.0)."""
+
+    def __set_name__(self, owner: type, name: str) -> None:
+        self._slot = '_' + name
+
+    def __get__(self, instance: Any, owner: type | None = None) -> float:
+        if instance is None:
+            return 0.0  # the dataclass default
+        value = instance.__dict__[self._slot]
+        return value.value() if isinstance(value, _Later) else value
+
+    def __set__(self, instance: Any, value: float | _Later) -> None:
+        instance.__dict__[self._slot] = value
+
+
 @dataclass(frozen=True)
 class PlaneVerification:
     """The verdict on one plane.
@@ -177,7 +214,8 @@ class PlaneVerification:
             part of it; a plane through boxes or a wall above the floor explains none.
         peak_score: The score with the sideways probes at ``probe_shift_px`` as well
             (:data:`PEAK_PROBES`), at most ``score``: for ranking planes a few pixels apart
-            on the same pair.
+            on the same pair. Its two probes (a fifth of a verification's time) are measured
+            when it is first read: a warm pair's lock is ranked against nothing.
         region_score: Measured only when asked (``verify_plane(..., own_region=True)``, for
             ``verification.plane: any``), else 0: the score over the plane's own region, the
             largest connected region of its supporting pixels once gaps of up to
@@ -203,7 +241,7 @@ class PlaneVerification:
     reason: str
     time_ms: float
     bottom_score: float = 0.0
-    peak_score: float = 0.0
+    peak_score: float = _MeasuredWhenRead()  # type: ignore[assignment]
     below_fraction: float = 0.0
     region_score: float = 0.0
     region_fraction: float = 0.0
@@ -263,7 +301,8 @@ class AgreementMaps:
         inside: (h, w) bool windows that map inside the right image.
         support: (h, w) bool pixels supporting the plane uniquely.
         peak_support: (h, w) bool supporting pixels where the plane also beats the
-            :data:`PEAK_PROBES` (the pixels of ``peak_score``).
+            :data:`PEAK_PROBES` (the pixels of ``peak_score``); None from ``_maps(...,
+            peak=False)``, which returns how to measure it instead.
         weight: (h, w) float32 what each pixel counts in the scores: 0 where not textured,
             else 1 or, with ``weight_by_contrast``, ``1 / max(std, min_texture)``.
     """
@@ -276,7 +315,7 @@ class AgreementMaps:
     textured: np.ndarray
     inside: np.ndarray
     support: np.ndarray
-    peak_support: np.ndarray
+    peak_support: np.ndarray | None
     weight: np.ndarray
 
 
@@ -336,7 +375,13 @@ def _working(left: np.ndarray, right: np.ndarray, config: VerificationConfig) ->
 
 def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: VerificationConfig,
           roi: tuple[float, float, float, float],
-          working: WorkingPair | None = None) -> AgreementMaps:
+          working: WorkingPair | None = None, peak: bool = True
+          ) -> tuple[AgreementMaps, Callable[[], np.ndarray]]:
+    """Return the agreement maps and how to measure their ``peak_support``.
+
+    With ``peak`` False the maps' ``peak_support`` is None and the returned function makes
+    it (the same array as with ``peak`` True); else it returns the maps' own.
+    """
     if working is None:
         working = _working(left, right, config)
     left_small, scale_left = working.left, working.left_map
@@ -383,15 +428,21 @@ def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: Verifica
     inside = ~outside
     support = (textured & inside & (ncc >= config.ncc_threshold)
                & (ncc >= best_probe + config.peak_margin))
-    peak_support = support.copy()
-    for dx, dy in PEAK_PROBES:
-        if support.any():
-            peak_support &= ncc >= probe_ncc(dx * narrow, dy * narrow) + config.peak_margin
-    return AgreementMaps(left=left_small,
+
+    def peak_support_of() -> np.ndarray:
+        peak_support = support.copy()
+        for dx, dy in PEAK_PROBES:
+            if support.any():
+                peak_support &= ncc >= probe_ncc(dx * narrow, dy * narrow) + config.peak_margin
+        return peak_support
+
+    peak_support = peak_support_of() if peak else None
+    maps = AgreementMaps(left=left_small,
                          warped=np.clip(warped_clean, 0, 255).astype(np.uint8), ncc=ncc,
                          probes=probes, best_probe=best_probe, textured=textured,
                          inside=inside, support=support, peak_support=peak_support,
                          weight=weight)
+    return maps, (peak_support_of if peak_support is None else lambda: peak_support)
 
 
 def agreement_maps(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
@@ -404,7 +455,7 @@ def agreement_maps(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
 
     """
     left, right = _check_pair(left, right)
-    return _maps(left, right, as_valid_homography(homography), config, _check_roi(roi))
+    return _maps(left, right, as_valid_homography(homography), config, _check_roi(roi))[0]
 
 
 def _check_pair(left: Any, right: Any) -> tuple[np.ndarray, np.ndarray]:
@@ -457,8 +508,9 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                                 or working.width != config.working_width_px):
         raise ValueError(f'working images made for {working.full_shape} at width '
                          f'{working.width}, not {left.shape} at {config.working_width_px}')
-    maps = _maps(left, right, hom, config, region, working)
-    verdict = _verdict(maps, config, start, region)
+    # The peak score is measured when first read (PlaneVerification.peak_score).
+    maps, peak_support = _maps(left, right, hom, config, region, working, peak=False)
+    verdict = _verdict(maps, config, start, region, peak_support)
     if not own_region:
         return verdict
     score, fraction = region_support(maps)
@@ -519,10 +571,12 @@ def _below(maps: AgreementMaps, config: VerificationConfig) -> np.ndarray:
 
 
 def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
-             region: tuple[float, float, float, float]) -> PlaneVerification:
+             region: tuple[float, float, float, float],
+             peak_support: Callable[[], np.ndarray]) -> PlaneVerification:
     region_px = max(1, int(np.count_nonzero(maps.textured | ~maps.textured)))
     n_textured = int(np.count_nonzero(maps.textured))
     textured_fraction = n_textured / region_px
+    peak: float | _Later
     if n_textured == 0:
         overlap = support = score = peak = below = 0.0
     else:
@@ -530,7 +584,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         support = int(np.count_nonzero(maps.textured & maps.inside
                                        & (maps.ncc >= config.ncc_threshold))) / n_textured
         score = _share(maps, maps.support)
-        peak = _share(maps, maps.peak_support)
+        peak = _Later(lambda: _share(maps, peak_support()))
         below = int(np.count_nonzero(_below(maps, config))) / n_textured
     span = config.accept_score - config.reject_score
     confidence = float(np.clip((score - config.reject_score) / span, 0.0, 1.0))
@@ -548,7 +602,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         support_fraction=float(support), overlap_fraction=float(overlap),
         textured_fraction=float(textured_fraction), reason=reason,
         time_ms=1000.0 * (time.perf_counter() - start), bottom_score=_bottom_score(maps, region),
-        peak_score=float(peak), below_fraction=float(below))
+        peak_score=peak, below_fraction=float(below))
 
 
 def swap_evidence(homography: np.ndarray, width: int, height: int,
