@@ -285,3 +285,33 @@ def test_contrast_weighting_lets_a_faint_floor_outweigh_the_boxes_on_it() -> Non
     # A plane moved a working pixel and a half sideways in the right image is refused.
     moved = np.array([[1.0, 0.0, 6.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]]) @ frame.homography
     assert not verification.verify_plane(frame.left, frame.right, moved, config).accepted
+
+
+def test_the_peak_score_is_measured_when_first_read(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The peak score's probes run only once it is read, and give the eagerly made share.
+
+    A verification without the reading (a warm pair's lock) costs the plane and its
+    :data:`~domplane_ros.core.verification.PROBES`; reading adds the
+    :data:`~domplane_ros.core.verification.PEAK_PROBES` once. Pickling keeps the value.
+    """
+    import pickle
+    from domplane_ros.sim.generators import random_scene
+    frame = random_scene(2)
+    config = _gate_config(frame.left.shape[1])
+    calls = []
+    ncc = verification._ncc
+    monkeypatch.setattr(verification, '_ncc', lambda *args: calls.append(1) or ncc(*args))
+    for dx in (0.0, 2.0):
+        plane = _translate(dx, 0.0) @ frame.homography
+        check = verification.verify_plane(frame.left, frame.right, plane, config)
+        assert len(calls) == 1 + len(verification.PROBES)
+        maps = verification.agreement_maps(frame.left, frame.right, plane, config)
+        eager = float(maps.weight[maps.peak_support].sum(dtype=np.float64)
+                      / maps.weight.sum(dtype=np.float64))
+        assert 0.0 < eager < check.score
+        calls.clear()
+        assert check.peak_score == eager
+        assert check.peak_score == eager  # measured once
+        assert len(calls) == len(verification.PEAK_PROBES)
+        assert pickle.loads(pickle.dumps(check)) == check
+        calls.clear()
