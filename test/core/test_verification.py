@@ -315,3 +315,23 @@ def test_the_peak_score_is_measured_when_first_read(monkeypatch: pytest.MonkeyPa
         assert len(calls) == len(verification.PEAK_PROBES)
         assert pickle.loads(pickle.dumps(check)) == check
         calls.clear()
+
+
+def test_agreement_maps_without_the_peak_on_the_shared_pair_are_the_same() -> None:
+    """``peak=False`` and a shared working pair change none of the other maps."""
+    import dataclasses
+    from domplane_ros.sim.generators import random_scene
+    frame = random_scene(2)
+    config = _gate_config(frame.left.shape[1])
+    working = verification.working_pair(frame.left, frame.right, config)
+    full = verification.agreement_maps(frame.left, frame.right, frame.homography, config)
+    light = verification.agreement_maps(frame.left, frame.right, frame.homography, config,
+                                        working=working, peak=False)
+    assert full.peak_support is not None and full.peak_support.any()
+    assert light.peak_support is None
+    for field in dataclasses.fields(full):
+        if field.name != 'peak_support':
+            assert np.array_equal(getattr(light, field.name), getattr(full, field.name)), field
+    with pytest.raises(ValueError, match='working images'):
+        verification.agreement_maps(frame.left[:, :-8], frame.right[:, :-8],
+                                    frame.homography, config, working=working)
