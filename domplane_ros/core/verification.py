@@ -180,7 +180,8 @@ class _MeasuredWhenRead:
     """A float field of a frozen dataclass that may hold a :class:`_Later` (default 0.0)."""
 
     def __set_name__(self, owner: type, name: str) -> None:
-        self._slot = '_' + name
+        # Kept under the field's own name: ``__dict__`` holds the fields, as without it.
+        self._slot = name
 
     def __get__(self, instance: Any, owner: type | None = None) -> float:
         if instance is None:
