@@ -192,6 +192,12 @@ class PlaneVerification:
             lies beyond the plane, below it if the plane is the ground. Nothing is seen below
             the ground, so the true ground's is small (at most 0.004 on 100 rendered tuning
             scenes), while a plane through boxes standing on a floor sees the floor below it.
+        top_score: The score over the highest :data:`BOTTOM_BAND` of the region only, as
+            ``bottom_score``, [0, 1].
+        middle_score: The score over the band between the two, as ``bottom_score``, [0, 1].
+            One surface explains a band between two bands it explains; a plane through a far
+            wall that explains the bottom only by aliasing a periodic floor does not (see
+            ``stream/trust.py``, ``MIN_MIDDLE_SHARE``).
     """
 
     accepted: bool
@@ -207,6 +213,8 @@ class PlaneVerification:
     below_fraction: float = 0.0
     region_score: float = 0.0
     region_fraction: float = 0.0
+    top_score: float = 0.0
+    middle_score: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -502,11 +510,20 @@ def _share(maps: AgreementMaps, pixels: np.ndarray, rows: slice = slice(None)) -
     return float(weight[pixels[rows]].sum(dtype=np.float64)) / total if total > 0 else 0.0
 
 
-def _bottom_score(maps: AgreementMaps, region: tuple[float, float, float, float]) -> float:
-    """Return the supporting share of the textured pixels in the region's lowest rows."""
+def _band_scores(maps: AgreementMaps, region: tuple[float, float, float, float]
+                 ) -> tuple[float, float, float]:
+    """Return the supporting shares of the textured pixels in the region's three bands.
+
+    Top, middle and bottom: the highest and lowest :data:`BOTTOM_BAND` of the region's rows
+    and the rows between them.
+    """
     height = maps.textured.shape[0]
-    top = int(round((region[3] - BOTTOM_BAND * (region[3] - region[1])) * height))
-    return _share(maps, maps.support, slice(top, None))
+    top = int(round((region[1] + BOTTOM_BAND * (region[3] - region[1])) * height))
+    bottom = int(round((region[3] - BOTTOM_BAND * (region[3] - region[1])) * height))
+    first = int(round(region[1] * height))
+    return (_share(maps, maps.support, slice(first, top)),
+            _share(maps, maps.support, slice(top, bottom)),
+            _share(maps, maps.support, slice(bottom, None)))
 
 
 def _below(maps: AgreementMaps, config: VerificationConfig) -> np.ndarray:
@@ -532,6 +549,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         score = _share(maps, maps.support)
         peak = _share(maps, maps.peak_support)
         below = int(np.count_nonzero(_below(maps, config))) / n_textured
+    bands = _band_scores(maps, region)
     span = config.accept_score - config.reject_score
     confidence = float(np.clip((score - config.reject_score) / span, 0.0, 1.0))
     reason = ''
@@ -547,8 +565,9 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         accepted=not reason, score=float(score), confidence=confidence,
         support_fraction=float(support), overlap_fraction=float(overlap),
         textured_fraction=float(textured_fraction), reason=reason,
-        time_ms=1000.0 * (time.perf_counter() - start), bottom_score=_bottom_score(maps, region),
-        peak_score=float(peak), below_fraction=float(below))
+        time_ms=1000.0 * (time.perf_counter() - start), bottom_score=bands[2],
+        peak_score=float(peak), below_fraction=float(below), top_score=bands[0],
+        middle_score=bands[1])
 
 
 def swap_evidence(homography: np.ndarray, width: int, height: int,
