@@ -210,6 +210,8 @@ class PlaneVerification:
             One surface explains a band between two bands it explains; a plane through a far
             wall that explains the bottom only by aliasing a periodic floor does not (see
             ``stream/trust.py``, ``MIN_MIDDLE_SHARE``).
+        middle_texture: The middle band's share of the region's textured pixels (each
+            weighted as in the score), [0, 1]: how much ``middle_score`` rests on.
     """
 
     accepted: bool
@@ -227,6 +229,7 @@ class PlaneVerification:
     region_fraction: float = 0.0
     top_score: float = 0.0
     middle_score: float = 0.0
+    middle_texture: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -523,19 +526,23 @@ def _share(maps: AgreementMaps, pixels: np.ndarray, rows: slice = slice(None)) -
 
 
 def _band_scores(maps: AgreementMaps, region: tuple[float, float, float, float]
-                 ) -> tuple[float, float, float]:
+                 ) -> tuple[float, float, float, float]:
     """Return the supporting shares of the textured pixels in the region's three bands.
 
     Top, middle and bottom: the highest and lowest :data:`BOTTOM_BAND` of the region's rows
-    and the rows between them.
+    and the rows between them; then the middle band's share of the region's textured pixels
+    (each weighted as in the score).
     """
     height = maps.textured.shape[0]
     top = int(round((region[1] + BOTTOM_BAND * (region[3] - region[1])) * height))
     bottom = int(round((region[3] - BOTTOM_BAND * (region[3] - region[1])) * height))
     first = int(round(region[1] * height))
+    total = float(maps.weight.sum(dtype=np.float64))
+    middle = float(maps.weight[top:bottom].sum(dtype=np.float64))
     return (_share(maps, maps.support, slice(first, top)),
             _share(maps, maps.support, slice(top, bottom)),
-            _share(maps, maps.support, slice(bottom, None)))
+            _share(maps, maps.support, slice(bottom, None)),
+            middle / total if total > 0 else 0.0)
 
 
 def _below(maps: AgreementMaps, config: VerificationConfig) -> np.ndarray:
@@ -579,7 +586,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         textured_fraction=float(textured_fraction), reason=reason,
         time_ms=1000.0 * (time.perf_counter() - start), bottom_score=bands[2],
         peak_score=float(peak), below_fraction=float(below), top_score=bands[0],
-        middle_score=bands[1])
+        middle_score=bands[1], middle_texture=bands[3])
 
 
 def swap_evidence(homography: np.ndarray, width: int, height: int,

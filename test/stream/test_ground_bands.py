@@ -6,6 +6,8 @@ wall), their truth from the renderer; default configuration and prior.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.verification import agreement_maps, BOTTOM_BAND, verify_plane
 from domplane_ros.sim.generators import random_scene
@@ -21,20 +23,55 @@ def _run(frame):
     return PlanePipeline().process(frame.left, frame.right, 0)
 
 
-def test_band_scores_split_the_score_by_rows():
+@pytest.mark.parametrize('roi', [None, (0.0, 0.55, 1.0, 1.0), (0.1, 0.3, 0.9, 0.8)])
+def test_band_scores_split_the_score_by_rows(roi):
     frame = random_scene(10002, floor='checker_32')
     config = TrustGate(PlaneNodeConfig().verification).config(frame.left.shape[1])
-    check = verify_plane(frame.left, frame.right, frame.homography, config)
-    maps = agreement_maps(frame.left, frame.right, frame.homography, config)
+    check = verify_plane(frame.left, frame.right, frame.homography, config, roi)
+    maps = agreement_maps(frame.left, frame.right, frame.homography, config, roi)
     height = maps.weight.shape[0]
-    top, bottom = round(BOTTOM_BAND * height), round((1 - BOTTOM_BAND) * height)
+    y0, y1 = (0.0, 1.0) if roi is None else (roi[1], roi[3])
+    top = round((y0 + BOTTOM_BAND * (y1 - y0)) * height)
+    bottom = round((y1 - BOTTOM_BAND * (y1 - y0)) * height)
     weights = [float(maps.weight[rows].sum()) for rows in
                (slice(0, top), slice(top, bottom), slice(bottom, None))]
     bands = (check.top_score, check.middle_score, check.bottom_score)
     # The score is the bands' scores weighted by the texture each holds.
     assert np.dot(weights, bands) / sum(weights) == pytest.approx(check.score, abs=1e-6)
-    # The true floor: under the far wall at the top, nearly nothing; at the bottom, most.
-    assert check.top_score < 0.05 and check.bottom_score > 0.5
+    assert check.middle_texture == pytest.approx(weights[1] / sum(weights), abs=1e-6)
+    assert all(weight > 0 for weight in weights)
+    if roi is None:
+        # The true floor: under the far wall at the top, nearly nothing; at the bottom, most.
+        assert check.top_score < 0.05 and check.bottom_score > 0.5
+
+
+def _judged(monkeypatch, **bands):
+    """Judge a cold scene's true floor with its verification's bands replaced."""
+    frame = random_scene(0)
+    gate = TrustGate(PlaneNodeConfig().verification)
+    real = gate._verify
+
+    def verify(left, right, homography, roi):
+        return replace(real(left, right, homography, roi), **bands)
+
+    monkeypatch.setattr(gate, '_verify', verify)
+    return gate.judge(frame.left, frame.right, frame.homography)
+
+
+@pytest.mark.parametrize('top, middle, bottom, texture, refused', [
+    (0.4, 0.19, 0.5, 0.3, True),     # under half the weaker outer band
+    (0.4, 0.21, 0.5, 0.3, False),    # over half of it
+    (0.6, 0.19, 0.4, 0.3, True),     # the weaker band is the bottom
+    (0.19, 0.0, 0.6, 0.3, False),    # the top explained too little to speak of a gap
+    (0.4, 0.0, 0.5, 0.09, False),    # a nearly blank middle says nothing
+])
+def test_the_band_rule_refuses_only_a_gap_between_two_explained_bands(
+        monkeypatch, top, middle, bottom, texture, refused):
+    verdict = _judged(monkeypatch, top_score=top, middle_score=middle, bottom_score=bottom,
+                      middle_texture=texture)
+    assert verdict.accepted is not refused, verdict.reason
+    if refused:
+        assert 'between them' in verdict.reason and verdict.ground
 
 
 def test_a_far_wall_aliasing_a_periodic_floor_is_not_published(monkeypatch):
