@@ -4,7 +4,7 @@ The point energy cannot tell a look-alike plane from the floor, so every plane t
 would publish is checked here by evidence the corners do not use
 (:func:`~domplane_ros.core.verification.verify_plane`: the share of the image's texture that
 this plane, and not the same plane moved slightly, explains) and by the geometry of a ground
-plane (:func:`~domplane_ros.core.verification.swap_evidence`: its disparity must grow toward
+plane (:func:`~domplane_ros.core.ground_slope.swap_evidence`: its disparity must grow toward
 the image bottom, or left and right are swapped).
 
 A search publishes a plane only if it is *unique*: it must explain clearly more of the image
@@ -43,12 +43,12 @@ from typing import Any, Callable, Generator, Hashable, Sequence
 
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
+from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, PlaneVerification,
-                                            REASON_LOW_SUPPORT, swap_evidence,
-                                            VerificationConfig, verify_plane, working_pair,
-                                            WorkingPair)
+                                            REASON_LOW_SUPPORT, VerificationConfig,
+                                            verify_plane, working_pair, WorkingPair)
 from domplane_ros.stream.uniqueness import Judged, Pick, Uniqueness
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
 import numpy as np

@@ -10,8 +10,8 @@ from dataclasses import replace
 
 from domplane_ros.config import (one_shot_search, PlaneNodeConfig, PriorConfig,
                                  VerificationSettings)
+from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.prior import leaning_candidates, prior_candidates, search_candidates
-from domplane_ros.core.verification import swap_evidence
 from domplane_ros.sim.boards import board_scene
 from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import search as search_module
