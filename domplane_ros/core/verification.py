@@ -45,20 +45,30 @@ Method (all at a working width of :attr:`VerificationConfig.working_width_px`):
 The **confidence** maps the score linearly onto [0, 1] between
 :attr:`VerificationConfig.reject_score` (0.10, confidence 0) and
 :attr:`VerificationConfig.accept_score` (0.30, confidence 1); a plane is accepted at
-confidence 0.5 or more, i.e. a score of 0.20. Measured with the pixels counted (before
-``weight_by_contrast``) on the tuning seeds 0-199 (rendered,
-random gain and offset): no wrong plane other than an exact floor-period look-alike scored
-above 0.17 (shifted 5-80 px, a cut, a prior candidate, a swapped-pair plane), 90 % of the true
-planes scored above 0.20 (median 0.46); 57 of 620 exact period look-alikes scored above 0.20
-and 11 above 0.30. The score is comparable between planes on the same pair: the true plane
-outscored every wrong plane of its scene, look-alikes included, in 198 of 200 scenes, so a
-search should rank its candidates by the score; an absolute threshold alone cannot reject a
-plane one period off on a perfectly periodic floor, which matches that floor everywhere.
+confidence 0.5 or more, i.e. a score of 0.20 (the pipeline sets both ends from
+``verification.min_score``, 0.25: confidence 0 at 0.15, 0.5 at 0.25, 1 at 0.35). Measured
+with ``tools/evaluate_verification --count 200`` on the tuning seeds 0-199 (rendered, random
+gain and offset; 2026-12-01, session 12; the weighted score, the counted one in brackets, same
+scenes and code): the true planes scored 0.238-0.886, median 0.640 (counted 0.124-0.863,
+median 0.571), 200 of 200 above 0.20 and 199 above 0.25 (counted 197 and 194). Apart from
+exact floor-period look-alikes, no wrong plane more than 10 px from the truth scored above
+0.17 (counted: one, a prior candidate 25.5 px off at 0.176); 23 planes 5-10 px off did
+(shifted 5 px, a cut or a prior candidate near the truth; counted 25), at most 0.358 (5.8 px
+off), 5 of them above 0.25 (counted 4). Of 620 exact period look-alikes 40 scored above 0.20,
+6 above 0.25 and 3 above 0.30, at most 0.344 (counted 135, 80 and 46, at most 0.580). The
+score is comparable between planes on the same pair: the true plane outscored every wrong
+plane of its scene, look-alikes included, in 200 of 200 scenes, by 1.38 times or more
+(counted 199: on seed 159 a look-alike scored 0.573 against the truth's 0.558), so a search
+should rank its candidates by the score; an absolute threshold alone cannot reject a plane
+one period off on a perfectly periodic floor, which matches that floor everywhere. (The first
+calibration, of an earlier counted score, gave 90 % of the true planes above 0.20, median
+0.46, 57 look-alikes above 0.20 and 11 above 0.30, and 198 of 200 scenes ranked right.) On
+the real pairs the weighting lowers the 13 chessboards' reference planes, judged as ground
+planes, from 0.120-0.276 (median 0.179) to 0.042-0.115 (median 0.072); KITTI's road scores
+0.332 (counted 0.336).
 
-:func:`swap_evidence` checks the other way round: whether a plane that verifies well was found
-for swapped cameras. For a ground plane seen by a correctly ordered head the plane's disparity
-``x - H(x)`` grows toward the bottom of the image (nearer floor); for swapped cameras ``H`` is
-the inverse and the disparity shrinks toward the bottom.
+Whether a plane that verifies well was found for swapped cameras is read from the plane's
+geometry alone: :func:`~domplane_ros.core.ground_slope.swap_evidence`.
 
 Nothing here imports ROS; the functions take numpy arrays and return frozen values.
 """
@@ -231,6 +241,14 @@ class PlaneVerification:
             lies beyond the plane, below it if the plane is the ground. Nothing is seen below
             the ground, so the true ground's is small (at most 0.004 on 100 rendered tuning
             scenes), while a plane through boxes standing on a floor sees the floor below it.
+        top_score: The score over the highest :data:`BOTTOM_BAND` of the region only, as
+            ``bottom_score``, [0, 1].
+        middle_score: The score over the band between the two, as ``bottom_score``, [0, 1].
+            One surface explains a band between two bands it explains; a plane through a far
+            wall that explains the bottom only by aliasing a periodic floor does not (see
+            ``stream/trust.py``, ``MIN_MIDDLE_SHARE``).
+        middle_texture: The middle band's share of the region's textured pixels (each
+            weighted as in the score), [0, 1]: how much ``middle_score`` rests on.
     """
 
     accepted: bool
@@ -246,23 +264,9 @@ class PlaneVerification:
     below_fraction: float = 0.0
     region_score: float = 0.0
     region_fraction: float = 0.0
-
-
-@dataclass(frozen=True)
-class SwapEvidence:
-    """Whether a plane homography looks like one found for swapped left and right cameras.
-
-    Attributes:
-        swapped: True when the plane's disparity shrinks toward the image bottom.
-        disparity_slope: Change of the disparity ``x - H(x, y)_x`` per image row along the
-            centre column over the given rows (pixels per pixel); positive for a ground plane
-            seen by a correctly ordered head.
-        disparity_bottom_px: Disparity at the bottom centre of the image.
-    """
-
-    swapped: bool
-    disparity_slope: float
-    disparity_bottom_px: float
+    top_score: float = 0.0
+    middle_score: float = 0.0
+    middle_texture: float = 0.0
 
 
 def _check_roi(roi: Sequence[float] | None) -> tuple[float, float, float, float]:
@@ -566,11 +570,24 @@ def _share(maps: AgreementMaps, pixels: np.ndarray, rows: slice = slice(None)) -
     return float(weight[pixels[rows]].sum(dtype=np.float64)) / total if total > 0 else 0.0
 
 
-def _bottom_score(maps: AgreementMaps, region: tuple[float, float, float, float]) -> float:
-    """Return the supporting share of the textured pixels in the region's lowest rows."""
+def _band_scores(maps: AgreementMaps, region: tuple[float, float, float, float]
+                 ) -> tuple[float, float, float, float]:
+    """Return the supporting shares of the textured pixels in the region's three bands.
+
+    Top, middle and bottom: the highest and lowest :data:`BOTTOM_BAND` of the region's rows
+    and the rows between them; then the middle band's share of the region's textured pixels
+    (each weighted as in the score).
+    """
     height = maps.textured.shape[0]
-    top = int(round((region[3] - BOTTOM_BAND * (region[3] - region[1])) * height))
-    return _share(maps, maps.support, slice(top, None))
+    top = int(round((region[1] + BOTTOM_BAND * (region[3] - region[1])) * height))
+    bottom = int(round((region[3] - BOTTOM_BAND * (region[3] - region[1])) * height))
+    first = int(round(region[1] * height))
+    total = float(maps.weight.sum(dtype=np.float64))
+    middle = float(maps.weight[top:bottom].sum(dtype=np.float64))
+    return (_share(maps, maps.support, slice(first, top)),
+            _share(maps, maps.support, slice(top, bottom)),
+            _share(maps, maps.support, slice(bottom, None)),
+            middle / total if total > 0 else 0.0)
 
 
 def _below(maps: AgreementMaps, config: VerificationConfig) -> np.ndarray:
@@ -598,6 +615,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         score = _share(maps, maps.support)
         peak = _Later(lambda: _share(maps, peak_support()))
         below = int(np.count_nonzero(_below(maps, config))) / n_textured
+    bands = _band_scores(maps, region)
     span = config.accept_score - config.reject_score
     confidence = float(np.clip((score - config.reject_score) / span, 0.0, 1.0))
     reason = ''
@@ -613,59 +631,6 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         accepted=not reason, score=float(score), confidence=confidence,
         support_fraction=float(support), overlap_fraction=float(overlap),
         textured_fraction=float(textured_fraction), reason=reason,
-        time_ms=1000.0 * (time.perf_counter() - start), bottom_score=_bottom_score(maps, region),
-        peak_score=peak, below_fraction=float(below))
-
-
-def swap_evidence(homography: np.ndarray, width: int, height: int,
-                  rows: tuple[float, float] = (0.6, 1.0),
-                  min_slope: float = 0.02) -> SwapEvidence:
-    """Tell whether a ground-plane homography was found for swapped cameras.
-
-    The disparity slope is read from the Jacobian ``J`` of ``H`` at five points down the
-    centre column over ``rows``: ``-(J[0, 1] + J[1, 0])``. For a plane map of a level head
-    ``J[0, 1]`` is minus the growth of the disparity ``x - H(x)_x`` per row; a roll ``r`` of the
-    right camera adds ``-r`` to ``J[0, 1]`` and ``+r`` to ``J[1, 0]``, so their sum does not
-    see the roll (to first order) while a swap flips its sign. Measured on rendered heads:
-    at least +0.052 px per row for true planes, with or without a rough rig (4 deg roll,
-    2 deg pitch, 3 % focal mismatch), at most -0.052 for swapped cameras; a plane facing the
-    camera (a wall) has none.
-
-    Args:
-        homography: (3, 3) float left-to-right plane homography.
-        width: Image width in pixels.
-        height: Image height in pixels.
-        rows: The band of rows, as fractions of the height, over which the disparity slope
-            is measured (the lower part, where the ground is).
-        min_slope: Slope below ``-min_slope`` is taken for swapped cameras.
-
-    Returns:
-        The :class:`SwapEvidence`.
-
-    Raises:
-        ValueError: If the homography is not a finite non-singular (3, 3) matrix, the size
-            is not positive or the row band is empty.
-
-    """
-    hom = as_valid_homography(homography)
-    if width < 1 or height < 2:
-        raise ValueError(f'image size must be at least 1 x 2, got {width} x {height}')
-    lo, hi = (float(r) for r in rows)
-    if not 0.0 <= lo < hi <= 1.0:
-        raise ValueError(f'rows must satisfy 0 <= lo < hi <= 1, got {rows!r}')
-    x = (width - 1) / 2.0
-    ys = np.linspace(lo, hi, 5) * (height - 1)
-    slopes = [_shear(hom, x, y) for y in ys]
-    bottom = hom @ np.array([x, ys[-1], 1.0])
-    slope = float(np.mean(slopes))
-    return SwapEvidence(swapped=bool(slope < -min_slope), disparity_slope=slope,
-                        disparity_bottom_px=float(x - bottom[0] / bottom[2]))
-
-
-def _shear(hom: np.ndarray, x: float, y: float) -> float:
-    """Return ``-(J[0, 1] + J[1, 0])`` of the homography's Jacobian at ``(x, y)``."""
-    p = hom @ np.array([x, y, 1.0])
-    w = p[2]
-    dx_dy = (hom[0, 1] * w - p[0] * hom[2, 1]) / (w * w)
-    dy_dx = (hom[1, 0] * w - p[1] * hom[2, 0]) / (w * w)
-    return float(-(dx_dy + dy_dx))
+        time_ms=1000.0 * (time.perf_counter() - start), bottom_score=bands[2],
+        peak_score=peak, below_fraction=float(below), top_score=bands[0],
+        middle_score=bands[1], middle_texture=bands[3])

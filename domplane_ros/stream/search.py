@@ -18,11 +18,12 @@ from typing import Callable
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import Features
+from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.homography import as_homography, corner_distance_px
 from domplane_ros.core.prior import PriorSearch, search_candidates
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.tracking import predict_plane_homography
-from domplane_ros.core.verification import REASON_LOW_SUPPORT, swap_evidence
+from domplane_ros.core.verification import REASON_LOW_SUPPORT
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, photometric_estimate
 from domplane_ros.stream.challenge import NEAR_LOCK_PX
@@ -57,7 +58,7 @@ DOUBT_UNIQUENESS = 1.4
 # 0.14; the further shifts find the truth, 0.385, and it is published 0.09 px off.
 DOUBT_CONFIDENCE = 0.75
 # ... and so does a search whose winner's disparity grows toward the image bottom by less than
-# this many pixels per row (core/verification.swap_evidence; a ground plane's slope is about
+# this many pixels per row (core/ground_slope.swap_evidence; a ground plane's slope is about
 # the baseline over the camera height times the cosine of the tilt: at least 0.032 within the
 # default prior, most far above): a nearly fronto-parallel plane through a far wall that passes
 # the ground checks. Measured: rough rig 10022 on 16 cm tiles (a held-out seed, looked at after
@@ -68,8 +69,11 @@ DOUBT_SLOPE = 0.05
 # A search in doubt that still has no verified plane refines its near misses photometrically
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
 # little of the image, with at least NEAR_MISS_RATIO x verification.min_score. Measured: docs/
-# BENCHMARKS.md, trust round 8.
-NEAR_MISS_RATIO = 0.8
+# BENCHMARKS.md, trust round 8. 0.6 (was 0.8): with the default min_score 0.25 that is 0.15,
+# where the confidence is 0; on faint 1.28 m tiles a plane 3 px off the floor explains 0.18
+# where the floor explains 0.29 (seeds 35 and 203 with ``both``), and its rescue lands on the
+# floor. Measured: docs/BENCHMARKS.md, round 13 of the faint floors.
+NEAR_MISS_RATIO = 0.6
 NEAR_MISSES = 2
 
 __all__ = ['PlaneSearch', 'propagate']

@@ -4,16 +4,17 @@ The point energy cannot tell a look-alike plane from the floor, so every plane t
 would publish is checked here by evidence the corners do not use
 (:func:`~domplane_ros.core.verification.verify_plane`: the share of the image's texture that
 this plane, and not the same plane moved slightly, explains) and by the geometry of a ground
-plane (:func:`~domplane_ros.core.verification.swap_evidence`: its disparity must grow toward
+plane (:func:`~domplane_ros.core.ground_slope.swap_evidence`: its disparity must grow toward
 the image bottom, or left and right are swapped).
 
 A search publishes a plane only if it is *unique*: it must explain clearly more of the image
-(:data:`CHALLENGE_MARGIN` times) than every distinct plane the search found on the same pair,
-the planes of swapped cameras (:data:`SWAP_STARTS`) included. On a periodic floor a
+(:data:`~domplane_ros.stream.verdict.CHALLENGE_MARGIN` times) than every distinct plane the
+search found on the same pair, the planes of swapped cameras included. On a periodic floor a
 look-alike one period off and the floor (or, with swapped cameras, the swapped floor) explain
 about the same share; which one is the floor cannot be told from that pair, so none is
-published. The confidence says so too: it is the lesser of the score's confidence and the
-uniqueness's (:meth:`Verdict.confidence`).
+published. :meth:`TrustGate.pick` judges the planes; the rules of uniqueness are
+:class:`~domplane_ros.stream.uniqueness.Uniqueness`'s. The confidence says so too: it is the
+lesser of the score's confidence and the uniqueness's (:meth:`Verdict.confidence`).
 
 While locked, a plane must also keep its score: a score that falls below a fraction of the
 lock's recent median means the view changed under the warm start (a cut, a saccade, a camera
@@ -24,36 +25,32 @@ explains clearly more of the image than the lock, the lock is replaced.
 
 With ``verification.plane: any`` the plane need not be the ground (a board, a wall): the
 disparity-slope, bottom and beyond checks are off (so swapped cameras are not detected: they
-cannot be told from one such plane), distinct planes are told over the whole image, not its
-bottom, and a search's winner is judged beside its period siblings (:meth:`TrustGate.siblings`,
-the plane moved by its texture's repeats): on a checkerboard a look-alike some squares off
-wins only if it explains clearly more than they do. A winner must also be one plane
-(:data:`MAX_RESIDUAL_FLOW_PX`, after a fit of two radial lenses), not a fit through the far
-field of a room; such fits are passed over, not published, and do not compete by their score.
-A plane that explains too little of the image may still be verified by its own region
-(:func:`own_region_verified`: a board covering a fifth of a textured room), and a winner must
-be unique in its own region too, against every distinct plane judged.
+cannot be told from one such plane), and a search's winner is judged beside its period
+siblings (:meth:`TrustGate.siblings`, the plane moved by its texture's repeats): on a
+checkerboard a look-alike some squares off wins only if it explains clearly more than they
+do (and it must be one plane, unique in its own region:
+:meth:`~domplane_ros.stream.uniqueness.Uniqueness.any_winner`). A plane that explains too
+little of the image may still be verified by its own region (:func:`own_region_verified`: a
+board covering a fifth of a textured room).
 """
 
 from __future__ import annotations
 
 from collections import deque
 from dataclasses import replace
-import math
 import statistics
-from typing import Any, Callable, Generator, Sequence
+from typing import Any, Callable, Generator, Hashable, Sequence
 
-import cv2
 from domplane_ros.config import VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
-from domplane_ros.core.flatness import one_plane_residual_px
+from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import (agreement_maps, own_region, PlaneVerification,
-                                            REASON_LOW_SUPPORT, swap_evidence,
-                                            VerificationConfig, verify_plane, working_pair,
-                                            WorkingPair)
-from domplane_ros.stream.verdict import CHALLENGE_MARGIN, distinct_planes, is_rival, Verdict
+from domplane_ros.core.verification import (agreement_maps, PlaneVerification,
+                                            REASON_LOW_SUPPORT, VerificationConfig,
+                                            verify_plane, working_pair, WorkingPair)
+from domplane_ros.stream.uniqueness import Judged, Pick, Uniqueness
+from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
 import numpy as np
 
 # Least disparity slope (pixels per row, roll-invariant; see swap_evidence) of a ground plane
@@ -80,18 +77,28 @@ MIN_BOTTOM_SHARE = 0.25
 # 6-7 px off through the faces of boxes on faint tiled floors (tuning seeds 188, 305) 0.047
 # and 0.052.
 MAX_BELOW_FRACTION = 0.03
+# A published plane that explains at least MIN_OUTER_BAND_SCORE of both the top and the bottom
+# third of the region (PlaneVerification.top_score, bottom_score) must explain at least
+# MIN_MIDDLE_SHARE of the weaker of the two in the band between (middle_score), where that band
+# holds at least MIN_MIDDLE_TEXTURE of the region's texture (middle_texture; a blank middle
+# says nothing): one surface seen from above runs from the bottom of the image up to its far
+# end. Measured on 317 planes
+# published on the tuning seeds 0-59 (cold, rough, lighting, sized floors on a nominal and a
+# rough head, faint tiles): the correct ones at least 0.70 of the weaker band; a plane through
+# a textured far wall that explains the bottom only by aliasing a 16 cm checker (sized floors
+# 10002, 41 px off, top / middle / bottom 0.75 / 0.07 / 0.37) 0.19; planes 1.9 and 2.5 px off
+# a checker under a far wall (sized floors 1, nominal and rough) 0.58 and 0.40 as published
+# (finished); the nominal one was judged at 0.48, 2.7 px off before its finish, just under the
+# half (the rough one's judged figure was not recorded). Such a plane still competes with the
+# winner for uniqueness (it explains the image as much as it does).
+MIN_MIDDLE_SHARE = 0.5
+MIN_OUTER_BAND_SCORE = 0.2
+MIN_MIDDLE_TEXTURE = 0.1
 # A plane's period siblings (TrustGate.siblings) are refined photometrically from the plane
 # moved by a repeat of its texture, with the samples' residual flow up to this many working
 # pixels (the repeat under perspective is not one translation; the first photometric
 # refinement of a coarse plane takes the same, stream/candidates.py PHOTOMETRIC_FIRST_NEAR_PX).
 SIBLING_NEAR_PX = 8.0
-# With verification.plane any, a search's winner must lie on one plane: the median residual
-# flow over its supporting pixels (core/flatness.py), after its photometric refinement, at
-# most this many pixels. Measured on the rendered boards' tuning seeds (sim/boards.py): the
-# published true boards 0.02-0.04 px (12 seeds), the planes through the room behind a board
-# that a search published 0.41-1.14 px (seeds 10, 15, 29). The tuning run with it: 17 of 30
-# published, 17 correct, 0 wrong (before it: 18, 17 and 1).
-MAX_RESIDUAL_FLOW_PX = 0.3
 # With verification.plane any, a plane that explains too little of the image is still
 # verified when it explains at least MIN_REGION_SCORE of the texture of its own region
 # (PlaneVerification.region_score) and that region covers at least MIN_REGION_FRACTION of the
@@ -99,24 +106,6 @@ MAX_RESIDUAL_FLOW_PX = 0.3
 # seeds (sim/boards.py, small and lens, 0-129; docs/METHOD.md).
 MIN_REGION_SCORE = 0.8
 MIN_REGION_FRACTION = 0.1
-# In ground mode the winner must also beat every distinct plane of this head by
-# CHALLENGE_MARGIN over the textured pixels both planes map inside the right image
-# (TrustGate._shared_rival): the score divides by every textured pixel, so a look-alike of
-# less disparity, which maps more of the image inside the right one, outscores the truth on a
-# floor whose pattern fills the view (measured: a 16 cm checker on a rough rig, tuning seed 48
-# of the sized floors, a plane 146 px off at 0.36 against the truth's 0.30; on the pixels both
-# see, the two explain as much). Rivals scoring under this share of the winner's are not
-# compared (each comparison costs a rival's agreement maps).
-SHARED_RIVAL_SHARE = 0.5
-# A plane of swapped cameras that would make a search's winner ambiguous is refuted when at
-# least MIN_SWAP_BEYOND of the textured flow samples lie beyond it in the swapped reading,
-# SWAP_BEYOND_RATIO times the winner's share, and at most MAX_WINNER_BEYOND lie beyond the
-# winner (TrustGate._swap_refuted). Measured on tuning seeds: docs/BENCHMARKS.md, trust round
-# 12 (true floors at most 0.004, swapped cameras' floors read as swapped at most 0.013, swapped
-# look-alikes on correctly ordered pairs at least 0.018).
-MIN_SWAP_BEYOND = 0.01
-SWAP_BEYOND_RATIO = 4.0
-MAX_WINNER_BEYOND = 0.01
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -142,7 +131,7 @@ class TrustGate:
         self._working: WorkingPair | None = None
         self._coarse_planes: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
-        self._flow: cv2.DISOpticalFlow | None = None
+        self._uniqueness = Uniqueness(self._coarse, self._per_pair)
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
         """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
@@ -159,6 +148,15 @@ class TrustGate:
         self._pair = self._working = None
         self._coarse_planes = {}
         self._verified = {}
+
+    def _per_pair(self, left: np.ndarray, right: np.ndarray, key: Hashable,
+                  compute: Callable[[], np.ndarray]) -> np.ndarray:
+        """Return ``compute()``, once per key for the pair of :meth:`begin_pair`."""
+        if self._pair is None or self._pair[0] is not left or self._pair[1] is not right:
+            return compute()
+        if key not in self._coarse_planes:
+            self._coarse_planes[key] = compute()
+        return self._coarse_planes[key]
 
     def _verify(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                 roi: Sequence[float] | None) -> PlaneVerification:
@@ -256,12 +254,31 @@ class TrustGate:
                            f'{self.settings.min_score:g})')
         if check.bottom_score < least:
             return Verdict(False, check, bottom, ground=False)
+        return self._one_surface(check) or self._held(check, locked)
+
+    @staticmethod
+    def _one_surface(check: PlaneVerification) -> Verdict | None:
+        """Return the refusal of a verified plane that is not one surface under the head.
+
+        Nothing may lie beyond the ground (:data:`MAX_BELOW_FRACTION`; not a rival of the
+        floor), and the ground explains the band between the top and bottom thirds it explains
+        (:data:`MIN_MIDDLE_SHARE`, where that band holds :data:`MIN_MIDDLE_TEXTURE` of the
+        texture; still a rival: a look-alike of the floor). None if neither refuses it.
+        """
         if check.below_fraction > MAX_BELOW_FRACTION:
             return Verdict(False, check, 'not the ground: '
                            f'{100 * check.below_fraction:.0f} % of the textured image lies '
                            f'beyond the plane (> {100 * MAX_BELOW_FRACTION:.0f} %); a plane '
                            'through obstacles above the floor?', ground=False)
-        return self._held(check, locked)
+        weaker = min(check.top_score, check.bottom_score)
+        if (weaker >= MIN_OUTER_BAND_SCORE and check.middle_texture >= MIN_MIDDLE_TEXTURE
+                and check.middle_score < MIN_MIDDLE_SHARE * weaker):
+            return Verdict(False, check, 'not the ground: the plane explains '
+                           f'{100 * check.top_score:.0f} % of the top and '
+                           f'{100 * check.bottom_score:.0f} % of the bottom of the region but '
+                           f'{100 * check.middle_score:.0f} % between them; a far wall and '
+                           'a periodic floor aliased?')
+        return None
 
     def _judge_any(self, check: PlaneVerification, locked: bool) -> Verdict:
         """Return the verdict of ``verification.plane: any``: no ground or swap checks.
@@ -394,7 +411,7 @@ class TrustGate:
     def pick(self, left: np.ndarray, right: np.ndarray, estimates: Sequence[PlaneEstimate],
              roi: Sequence[float] | None = None,
              rivals: Sequence[np.ndarray] | Callable[[], Sequence[np.ndarray]] | None = None
-             ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
+             ) -> Pick:
         """Verify every estimate and return the best verified one, if it is unique.
 
         Candidates are ranked by the verification (its peak score), not by the point energy:
@@ -406,14 +423,17 @@ class TrustGate:
         judged (distinct or not) and of every plane of ``rivals``: (3, 3) homographies judged
         only as rivals, never published (the swapped cameras' planes,
         :mod:`domplane_ros.stream.swap`), or a callable giving them, called only once a plane
-        is verified.
+        is verified. The rules of uniqueness:
+        :meth:`~domplane_ros.stream.uniqueness.Uniqueness.ground_winner` and, with
+        ``verification.plane: any``,
+        :meth:`~domplane_ros.stream.uniqueness.Uniqueness.any_winner`.
 
         Returns:
             The best verified estimate and its verdict (None, None if none verified or it is
             not unique) and, if none, why (the swap reason if any plane looked swapped).
 
         """
-        judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]] = []
+        judged: list[Judged] = []
         height, width = left.shape
         corners = np.array([[0, 0, 1], [width - 1, 0, 1], [width - 1, height - 1, 1],
                             [0, height - 1, 1]], np.float64).T
@@ -433,24 +453,9 @@ class TrustGate:
             rival_planes = rivals() if callable(rivals) else rivals
             judged += [(None, rival, self.judge(left, right, rival, roi))
                        for rival in rival_planes or []]
-            if self.settings.plane == 'any':
-                return self._pick_any(left, right, judged, verified, roi)
-            best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
-            rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                            if is_rival(v, h, best_h, width, height)
-                            and not self._swap_refuted(left, right, best_h, verdict, h, v)]
-            top, top_swapped = max(rival_scores, default=(0.0, False))
-            verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
-                              contested=any(not swapped for _, swapped in rival_scores))
-            if verdict.uniqueness >= CHALLENGE_MARGIN:
-                shared = self._shared_rival(left, right, best_h, verdict, judged, roi)
-                if shared:
-                    return None, None, shared
-                return best, verdict, ''
-            kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
-            return None, None, (f'ambiguous: a {kind} explains the image almost as well '
-                                f'(score {top:.2f} against {verdict.score:.2f} < '
-                                f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
+            pick = (self._uniqueness.any_winner if self.settings.plane == 'any'
+                    else self._uniqueness.ground_winner)
+            return pick(left, right, judged, verified, roi, self.config(width))
         if swapped:
             # The image is explained better by a plane of swapped cameras: what passes the
             # ground check is a look-alike (measured: a checker floor one period off).
@@ -459,159 +464,6 @@ class TrustGate:
             return None, None, ''
         closest = max(reasons, key=lambda v: v.score)
         return None, None, closest.reason
-
-    def _shared_rival(self, left: np.ndarray, right: np.ndarray, best_h: np.ndarray,
-                      verdict: Verdict,
-                      judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],
-                      roi: Sequence[float] | None) -> str:
-        """Return why the winner is ambiguous on the pixels it shares with a rival ('' if not).
-
-        See :data:`SHARED_RIVAL_SHARE`. Compared with every distinct ground plane of this head
-        judged on the pair that scores at least that share of the winner: the winner's
-        supporting pixels among the textured pixels both map inside the right image, each
-        counted as in the score, must be at least :data:`CHALLENGE_MARGIN` times the rival's
-        there.
-        """
-        height, width = left.shape
-        rivals = [h for _, h, v in judged
-                  if v.ground and not v.swapped and v.score >= SHARED_RIVAL_SHARE * verdict.score
-                  and distinct_planes(h, best_h, width, height)]
-        if not rivals:
-            return ''
-        config = self.config(width)
-        mine = agreement_maps(left, right, best_h, config, roi)
-        for h in rivals:
-            theirs = agreement_maps(left, right, h, config, roi)
-            both = mine.inside & theirs.inside
-            # Each pixel counts as in the score (core/verification.py, step 5).
-            ours = float(mine.weight[mine.support & both].sum(dtype=np.float64))
-            other = float(theirs.weight[theirs.support & both].sum(dtype=np.float64))
-            if other * CHALLENGE_MARGIN > ours:
-                share = other / max(ours, 1e-9)
-                return ('ambiguous: a distinct plane explains the pixels both planes see almost '
-                        f'as well ({share:.2f} of the support of the winner there > 1 / '
-                        f'{CHALLENGE_MARGIN:g}; a periodic floor?)')
-        return ''
-
-    def _swap_refuted(self, left: np.ndarray, right: np.ndarray, best: np.ndarray,
-                      verdict: Verdict, rival: np.ndarray, rival_verdict: Verdict) -> bool:
-        """Return whether a plane of swapped cameras is refuted by its residual parallax.
-
-        Only a swapped plane that would make the winner ambiguous (a score above the
-        winner's over :data:`CHALLENGE_MARGIN`) is tested. Nothing is seen beyond the ground
-        (:meth:`~domplane_ros.core.coarse.CoarseAligner.beyond_share`): a swapped floor's
-        look-alike of a periodic floor leaves the texture that does not repeat (boxes, the
-        tiles' shading) beyond it in the swapped reading, the true floor nothing beyond it.
-        The swapped plane is refuted when at least :data:`MIN_SWAP_BEYOND` of the texture lies
-        beyond it, :data:`SWAP_BEYOND_RATIO` times the winner's share, and at most
-        :data:`MAX_WINNER_BEYOND` lies beyond the winner (a winner a few pixels off a faint
-        floor has the floor beyond it: tuning faint seed 11, 6 px off, 0.085). Real swapped
-        cameras make the swapped plane the truth, with nothing beyond it: not refuted.
-        """
-        if not rival_verdict.swapped or rival_verdict.score * CHALLENGE_MARGIN <= verdict.score:
-            return False
-        theirs = self._beyond_share(left, right, rival, True)
-        if theirs < MIN_SWAP_BEYOND:
-            return False
-        mine = self._beyond_share(left, right, best, False)
-        return mine <= MAX_WINNER_BEYOND and theirs >= SWAP_BEYOND_RATIO * mine
-
-    def _beyond_share(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                      swapped: bool) -> float:
-        """Return :meth:`CoarseAligner.beyond_share`, once per plane and pair."""
-        key = ('beyond', np.asarray(homography, np.float64).tobytes(), swapped)
-        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
-        if same and key in self._coarse_planes:
-            return float(self._coarse_planes[key])
-        share = self._coarse.beyond_share(left, right, homography, swapped)
-        if same:
-            self._coarse_planes[key] = np.array(share)
-        return share
-
-    def _pick_any(self, left: np.ndarray, right: np.ndarray,
-                  judged: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],
-                  verified: list[tuple[PlaneEstimate | None, np.ndarray, Verdict]],
-                  roi: Sequence[float] | None
-                  ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
-        """Return :meth:`pick`'s answer for ``verification.plane: any``.
-
-        The verified planes are taken by peak score; one that is not one plane
-        (:meth:`_several_planes`: a fit through the room behind a small board, which in a
-        textured room explains more of the image than the board) is not the winner, and the
-        next is tried. The first that is one plane is published if it is unique (distinct
-        planes over the whole image: a board need not be at the bottom): its score at least
-        :data:`CHALLENGE_MARGIN` times that of every distinct plane judged that is one plane,
-        and its support in its own region (:func:`~domplane_ros.core.verification.own_region`)
-        that many times that of every distinct plane judged there, one plane or not (a
-        board's own plane refused for the lens it is seen through still beats its
-        look-alike some squares off; a fit through the room does not reach into the board).
-        """
-        height, width = left.shape
-        several = ''
-        for best, best_h, verdict in sorted(verified, key=lambda item: -item[2].peak_score):
-            several = self._several_planes(left, right, best_h, roi)
-            if several:
-                continue
-            least = verdict.score / CHALLENGE_MARGIN
-            rivals = [(h, v) for _, h, v in judged
-                      if is_rival(v, h, best_h, width, height, rows=0.0)]
-            top = max((v.score for h, v in rivals
-                       if v.score <= least or not self._several_planes(left, right, h, roi)),
-                      default=0.0)
-            verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
-            if verdict.uniqueness < CHALLENGE_MARGIN:
-                return None, None, ('ambiguous: a distinct plane explains the image almost '
-                                    f'as well (score {top:.2f} against {verdict.score:.2f} < '
-                                    f'{CHALLENGE_MARGIN:g} x; a periodic board?)')
-            config = self.config(width)
-            maps = agreement_maps(left, right, best_h, config, roi)
-            own = own_region(maps)
-            mine = int(np.count_nonzero(maps.support & own))
-            for h, _ in rivals:
-                theirs = int(np.count_nonzero(
-                    agreement_maps(left, right, h, config, roi).support & own))
-                if theirs * CHALLENGE_MARGIN > mine:
-                    return None, None, ('ambiguous: a distinct plane explains its region '
-                                        f'almost as well ({theirs} against {mine} supporting '
-                                        f'pixels < {CHALLENGE_MARGIN:g} x; a periodic board?)')
-            return best, verdict, ''
-        return None, None, several
-
-    def _several_planes(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                        roi: Sequence[float] | None) -> str:
-        """Return why a winner of ``verification.plane: any`` is no one plane ('' if it is).
-
-        A plane fitted through surfaces at several depths (the far field of a room) passes
-        the verification's working scale; its supporting pixels are then about a pixel off it
-        and off its photometric refinement (:meth:`refined`) alike
-        (:func:`~domplane_ros.core.flatness.residual_flow_px` of the refinement). The ground
-        checks refuse such planes in ``ground`` mode, so this runs in ``any`` mode only. Once
-        per plane and pair.
-        """
-        if self.settings.plane != 'any':
-            return ''
-        key = ('flow', np.asarray(homography, np.float64).tobytes())
-        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
-        residual = self._coarse_planes.get(key) if same else None
-        if residual is None:
-            if self._flow is None:
-                self._flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-            maps = agreement_maps(left, right, homography, self.config(left.shape[1]), roi)
-            # A search's candidates are refined only once picked: the plane's photometric
-            # refinement is measured, so that a true plane a few tenths of a pixel off (not
-            # yet finished) is not refused; a fit through several surfaces stays one.
-            refined = self._coarse.refine(left, right, homography)
-            residual = np.array(one_plane_residual_px(
-                left, right, homography if refined is None else refined, maps.support,
-                self._flow))
-            if same:
-                self._coarse_planes[key] = residual
-        if float(residual) <= MAX_RESIDUAL_FLOW_PX:
-            return ''
-        return (f'not one plane: its supporting pixels are {float(residual):.2f} px off it '
-                f'(median residual flow, after a fit of radial lenses, > '
-                f'{MAX_RESIDUAL_FLOW_PX:g}); surfaces at several depths, such as the '
-                'room behind a small board?')
 
     def polish(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                roi: Sequence[float] | None = None) -> np.ndarray:

@@ -40,7 +40,10 @@ class Verdict:
         uniqueness: Its score over the best score of a distinct plane judged on the same pair
             (:meth:`TrustGate.pick`); inf when there was none.
         ground: False for a plane refused as no ground plane (a wall, a plane through boxes
-            above the floor): it does not compete with ground planes for uniqueness.
+            above the floor): it does not compete with ground planes for uniqueness. A plane
+            refused for the band between the top and bottom it explains (a far wall aliasing
+            a periodic floor, ``trust.MIN_MIDDLE_SHARE``) keeps True: a look-alike of the
+            floor that explains as much still makes the pair ambiguous.
         contested: A distinct plane of this head (not of swapped cameras) was judged beside
             it (:meth:`TrustGate.pick`): its uniqueness was tested against the search's other
             planes, not only against the swapped rivals. False outside a pick.
@@ -86,7 +89,7 @@ def is_rival(verdict: Verdict, homography: np.ndarray, best: np.ndarray, width: 
     A plane of swapped cameras always does (the other hypothesis about the head, however
     close it maps: measured, a checker's swapped floor 0.6 px from the truth and a look-alike
     9 px off it, within 8 px of each other at the image bottom); a plane of this head only
-    when distinct; walls and planes through obstacles never.
+    when distinct; walls and planes through obstacles never (``Verdict.ground``).
     """
     return verdict.ground and (verdict.swapped
                                or distinct_planes(homography, best, width, height, rows))

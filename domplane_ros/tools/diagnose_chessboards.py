@@ -23,9 +23,9 @@ import sys
 
 import cv2
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
+from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.homography import fit_homography
 from domplane_ros.core.prior import prior_candidates
-from domplane_ros.core.verification import swap_evidence
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import Verdict

@@ -39,7 +39,7 @@ from typing import Any, Iterator, Sequence
 
 import cv2
 from domplane_ros.config import PriorConfig
-from domplane_ros.core import prior, verification
+from domplane_ros.core import ground_slope, prior, verification
 from domplane_ros.core.homography import apply_homography, fit_homography
 from domplane_ros.sim.generators import random_boxes, random_scene, random_setup
 from domplane_ros.sim.model import BACKGROUNDS
@@ -308,7 +308,7 @@ def _evaluate_rendered(seeds: Sequence[int], floor: str | None, cache: Path | No
             if kind not in TRUE_KINDS and not wrong:
                 continue  # a "wrong" plane that happens to be near the truth
             result = verification.verify_plane(left, right, hom, config)
-            swap = verification.swap_evidence(hom, *left.shape[::-1])
+            swap = ground_slope.swap_evidence(hom, *left.shape[::-1])
             rows.setdefault(kind, []).append((result, swap))
             records.append((seed, str(data['floor']), kind, error, result.score,
                             result.support_fraction, result.accepted, swap.disparity_slope))
@@ -349,7 +349,7 @@ def _run(args: argparse.Namespace) -> int:
         real: dict[str, list] = {}
         for pair, kind, hom, left, right, _ in real_hypotheses(args.data):
             result = verification.verify_plane(left, right, hom, config)
-            swap = verification.swap_evidence(hom, *left.shape[::-1])
+            swap = ground_slope.swap_evidence(hom, *left.shape[::-1])
             real.setdefault(kind, []).append((result, swap))
             if kind in ('true', 'swap_ok'):
                 print(f'{pair} {kind}: score {result.score:.3f} accepted {result.accepted} '

@@ -6,7 +6,7 @@ from dataclasses import replace
 
 import cv2
 from domplane_ros.config import PriorConfig
-from domplane_ros.core import prior, verification
+from domplane_ros.core import ground_slope, prior, verification
 from domplane_ros.sim.model import Box, CameraSetup, HeadPose, StereoFrame
 from domplane_ros.sim.render import render_stereo
 import numpy as np
@@ -87,13 +87,13 @@ def test_cut_and_prior_planes_are_rejected(frame: StereoFrame) -> None:
 
 def test_swapped_cameras_are_detected(frame: StereoFrame) -> None:
     width, height = SETUP.width, SETUP.height
-    correct = verification.swap_evidence(frame.homography, width, height)
+    correct = ground_slope.swap_evidence(frame.homography, width, height)
     assert not correct.swapped and correct.disparity_slope > 0.0
     # For the swapped pair the correct plane is H^-1: it verifies (it is right for that pair)
     # and the swap evidence names the problem.
     swapped_h = _inverse(frame.homography)
     assert verification.verify_plane(frame.right, frame.left, swapped_h, CONFIG).accepted
-    evidence = verification.swap_evidence(swapped_h, width, height)
+    evidence = ground_slope.swap_evidence(swapped_h, width, height)
     assert evidence.swapped and evidence.disparity_slope < 0.0
     # The unswapped plane on the swapped pair does not verify.
     assert not verification.verify_plane(frame.right, frame.left, frame.homography,
@@ -147,7 +147,7 @@ def test_bad_homography_raises(hom: object, message: str) -> None:
     with pytest.raises(ValueError, match=message):
         verification.verify_plane(image, image, hom)
     with pytest.raises(ValueError, match=message):
-        verification.swap_evidence(hom, 64, 48)
+        ground_slope.swap_evidence(hom, 64, 48)
 
 
 def test_bad_images_raise() -> None:
@@ -161,7 +161,7 @@ def test_bad_images_raise() -> None:
     with pytest.raises(ValueError, match='roi'):
         verification.verify_plane(image, image, np.eye(3), roi=(0.5, 0, 0.2, 1))
     with pytest.raises(ValueError, match='rows'):
-        verification.swap_evidence(np.eye(3), 64, 48, rows=(0.9, 0.1))
+        ground_slope.swap_evidence(np.eye(3), 64, 48, rows=(0.9, 0.1))
 
 
 @pytest.mark.parametrize('field, value', [

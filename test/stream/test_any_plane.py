@@ -10,16 +10,18 @@ from dataclasses import replace
 
 from domplane_ros.config import (one_shot_search, PlaneNodeConfig, PriorConfig,
                                  VerificationSettings)
+from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.prior import leaning_candidates, prior_candidates, search_candidates
-from domplane_ros.core.verification import swap_evidence
 from domplane_ros.sim.boards import board_scene
 from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
+from domplane_ros.stream import uniqueness as uniqueness_module
 from domplane_ros.stream.candidates import photometric_estimate
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import plane_status
 from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.uniqueness import Uniqueness
 import numpy as np
 import pytest
 from truth import two_depths
@@ -125,7 +127,7 @@ def test_a_plane_through_two_depths_is_not_published_in_any_mode(monkeypatch):
     best, _, reason = gate.pick(left, right, [photometric_estimate(mid)])
     assert best is None and reason.startswith('not one plane'), reason
     # Switched off, the same pick publishes it.
-    monkeypatch.setattr(trust_module, 'MAX_RESIDUAL_FLOW_PX', 10.0)
+    monkeypatch.setattr(uniqueness_module, 'MAX_RESIDUAL_FLOW_PX', 10.0)
     assert TrustGate(ANY).pick(left, right, [photometric_estimate(mid)])[0] is not None
 
 
@@ -171,19 +173,19 @@ def test_a_look_alike_loses_in_its_region_to_the_board_even_if_the_board_is_no_o
     alike = min(looks, key=lambda h: plane_error_px(frame, h))  # one square off: 29 px
     assert plane_error_px(frame, alike) > 5.0
     assert gate.judge(frame.left, frame.right, alike).accepted
-    real = TrustGate._several_planes
+    real = Uniqueness.several_planes
 
-    def board_is_no_one_plane(self, left, right, homography, roi):
+    def board_is_no_one_plane(self, left, right, homography, roi, config):
         if np.allclose(homography, frame.homography):
             return 'not one plane (by the test)'
-        return real(self, left, right, homography, roi)
+        return real(self, left, right, homography, roi, config)
 
-    monkeypatch.setattr(TrustGate, '_several_planes', board_is_no_one_plane)
+    monkeypatch.setattr(Uniqueness, 'several_planes', board_is_no_one_plane)
     planes = [photometric_estimate(alike), photometric_estimate(frame.homography)]
     best, _, reason = TrustGate(ANY).pick(frame.left, frame.right, planes)
     # The board explains the look-alike's own region as well: ambiguous, nothing published.
     assert best is None and 'explains its region' in reason, reason
     # Without the region's uniqueness the look-alike would be published.
-    monkeypatch.setattr(trust_module, 'own_region', lambda maps: np.zeros_like(maps.support))
+    monkeypatch.setattr(uniqueness_module, 'own_region', lambda maps: np.zeros_like(maps.support))
     best, _, reason = TrustGate(ANY).pick(frame.left, frame.right, planes)
     assert best is not None and plane_error_px(frame, best.homography) > 5.0, reason

@@ -19,6 +19,7 @@ from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import plane_error_px, random_rig_error, rough_rig, swapped
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
+from domplane_ros.stream import uniqueness as uniqueness_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import distinct_planes, Verdict
@@ -64,7 +65,7 @@ def test_a_look_alike_that_sees_more_of_the_image_is_not_published(monkeypatch):
         original(self, width), weight_by_contrast=False))
     result = _run(frame)
     assert not result.ok and 'both planes see' in result.reason, result.reason
-    _wrong_without(frame, monkeypatch, (trust_module, 'SHARED_RIVAL_SHARE', math.inf))
+    _wrong_without(frame, monkeypatch, (uniqueness_module, 'SHARED_RIVAL_SHARE', math.inf))
 
 
 @pytest.mark.parametrize('seed, rough', [(409, False), (453, True)])
@@ -89,7 +90,7 @@ def test_a_swapped_look_alike_with_texture_beyond_it_leaves_the_floor_unique(
     # The same pair with the cameras swapped: the swapped floor is the truth, nothing lies
     # beyond it, and it is not refuted.
     assert not _run(swapped(frame)).ok
-    monkeypatch.setattr(trust_module, 'MIN_SWAP_BEYOND', math.inf)
+    monkeypatch.setattr(uniqueness_module, 'MIN_SWAP_BEYOND', math.inf)
     without = _run(frame)
     assert not without.ok and 'swapped' in without.reason, without.reason
 
@@ -102,7 +103,7 @@ def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
     # The look-alike also sees texture beyond it (below_fraction): that check alone refuses
     # it as well, so it is switched off here to show the rival's part.
     _wrong_without(frame, monkeypatch,
-                   (trust_module, 'is_rival', lambda verdict, h, best, width, height: (
+                   (uniqueness_module, 'is_rival', lambda verdict, h, best, width, height: (
                        verdict.ground and distinct_planes(h, best, width, height))),
                    (trust_module, 'MAX_BELOW_FRACTION', 1.0))
 
@@ -278,14 +279,14 @@ def test_faint_large_tiles_give_the_floor_not_a_plane_five_pixels_off(monkeypatc
     # that plane 0.24 (refused); the photometric refinement, sampling the faint floor, brings
     # the fits to the floor. Fails with either off (weight_by_contrast: the 2 px fits are
     # refused, nothing published; refine_min_gradient 20: refined toward the boxes).
-    # Since the shared-pixels comparison (stream/trust.py SHARED_RIVAL_SHARE, same session) a
+    # Since the shared-pixels comparison (stream/uniqueness.py SHARED_RIVAL_SHARE, same session) a
     # distinct plane explains 0.90 of the floor's support on the pixels both see, so the
     # default refuses the pair as ambiguous: no plane over 5 px either way; the floor is
     # published without that comparison.
     frame, pipeline = _faint_both(230)
     result = pipeline.process(frame.left, frame.right, 0)
     assert not result.ok or plane_error_px(frame, result.homography) < 1.0, result.reason
-    monkeypatch.setattr(trust_module, 'SHARED_RIVAL_SHARE', math.inf)
+    monkeypatch.setattr(uniqueness_module, 'SHARED_RIVAL_SHARE', math.inf)
     frame, pipeline = _faint_both(230)
     result = pipeline.process(frame.left, frame.right, 0)
     assert result.ok, result.reason
@@ -313,7 +314,7 @@ def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(
     frame, pipeline = _faint_both(11)
     result = pipeline.process(frame.left, frame.right, 0)
     assert not result.ok and 'swapped' in result.reason, result.reason
-    monkeypatch.setattr(trust_module, 'MAX_WINNER_BEYOND', math.inf)
+    monkeypatch.setattr(uniqueness_module, 'MAX_WINNER_BEYOND', math.inf)
     frame, pipeline = _faint_both(11)
     without = pipeline.process(frame.left, frame.right, 0)
     # 3.5 px off since the refinement samples the faint floor (round 12; 6.1 px before it):
