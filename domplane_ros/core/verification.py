@@ -84,6 +84,7 @@ import cv2
 from domplane_ros.core.features import check_roi
 from domplane_ros.core.homography import as_valid_homography, resize_homography
 from domplane_ros.core.image import check_gray
+from domplane_ros.core.later import Later, MeasuredWhenRead
 import numpy as np
 
 # Probe directions (the plane moved in the right image; sideways first, then up and down).
@@ -165,44 +166,6 @@ class VerificationConfig:
                              f'{self.reject_score!r}, {self.accept_score!r}')
 
 
-class _Later:
-    """A float measured when first read (the peak score), then kept; pickled as the float."""
-
-    __slots__ = ('_measure', '_value')
-
-    def __init__(self, measure: Callable[[], float]) -> None:
-        """Keep the measurement, not run yet."""
-        self._measure: Callable[[], float] | None = measure
-        self._value = 0.0
-
-    def value(self) -> float:
-        """Return the value, measured on the first call (its working arrays then let go)."""
-        if self._measure is not None:
-            self._value, self._measure = float(self._measure()), None
-        return self._value
-
-    def __reduce__(self) -> tuple[Any, tuple[float]]:
-        """Pickle as the plain float."""
-        return float, (self.value(),)
-
-
-class _MeasuredWhenRead:
-    """A float field of a frozen dataclass that may hold a :class:`_Later` (default 0.0)."""
-
-    def __set_name__(self, owner: type, name: str) -> None:
-        # Kept under the field's own name: ``__dict__`` holds the fields, as without it.
-        self._slot = name
-
-    def __get__(self, instance: Any, owner: type | None = None) -> float:
-        if instance is None:
-            return 0.0  # the dataclass default
-        value = instance.__dict__[self._slot]
-        return value.value() if isinstance(value, _Later) else value
-
-    def __set__(self, instance: Any, value: float | _Later) -> None:
-        instance.__dict__[self._slot] = value
-
-
 @dataclass(frozen=True)
 class PlaneVerification:
     """The verdict on one plane.
@@ -260,7 +223,7 @@ class PlaneVerification:
     reason: str
     time_ms: float
     bottom_score: float = 0.0
-    peak_score: float = _MeasuredWhenRead()  # type: ignore[assignment]
+    peak_score: float = MeasuredWhenRead()  # type: ignore[assignment]
     below_fraction: float = 0.0
     region_score: float = 0.0
     region_fraction: float = 0.0
@@ -605,7 +568,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
     region_px = max(1, int(np.count_nonzero(maps.textured | ~maps.textured)))
     n_textured = int(np.count_nonzero(maps.textured))
     textured_fraction = n_textured / region_px
-    peak: float | _Later
+    peak: float | Later
     if n_textured == 0:
         overlap = support = score = peak = below = 0.0
     else:
@@ -613,7 +576,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         support = int(np.count_nonzero(maps.textured & maps.inside
                                        & (maps.ncc >= config.ncc_threshold))) / n_textured
         score = _share(maps, maps.support)
-        peak = _Later(lambda: _share(maps, peak_support()))
+        peak = Later(lambda: _share(maps, peak_support()))
         below = int(np.count_nonzero(_below(maps, config))) / n_textured
     bands = _band_scores(maps, region)
     span = config.accept_score - config.reject_score
