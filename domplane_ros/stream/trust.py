@@ -385,7 +385,7 @@ class TrustGate:
         if cached is not None:
             return list(cached)
         config = self.config(left.shape[1])
-        maps = agreement_maps(left, right, homography, config, roi)
+        maps = agreement_maps(left, right, homography, config, roi, peak=False)
         scale = left.shape[1] / maps.left.shape[1]
         vectors = scale * period_vectors(maps.left, maps.support)
         shifts = list(vectors)

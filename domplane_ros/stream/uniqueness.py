@@ -140,9 +140,9 @@ class Uniqueness:
                   and distinct_planes(h, best_h, width, height)]
         if not rivals:
             return ''
-        mine = agreement_maps(left, right, best_h, config, roi)
+        mine = agreement_maps(left, right, best_h, config, roi, peak=False)
         for h in rivals:
-            theirs = agreement_maps(left, right, h, config, roi)
+            theirs = agreement_maps(left, right, h, config, roi, peak=False)
             both = mine.inside & theirs.inside
             # Each pixel counts as in the score (core/verification.py, step 5).
             ours = float(mine.weight[mine.support & both].sum(dtype=np.float64))
@@ -219,12 +219,12 @@ class Uniqueness:
                 return None, None, ('ambiguous: a distinct plane explains the image almost '
                                     f'as well (score {top:.2f} against {verdict.score:.2f} < '
                                     f'{CHALLENGE_MARGIN:g} x; a periodic board?)')
-            maps = agreement_maps(left, right, best_h, config, roi)
+            maps = agreement_maps(left, right, best_h, config, roi, peak=False)
             own = own_region(maps)
             mine = int(np.count_nonzero(maps.support & own))
             for h, _ in rivals:
                 theirs = int(np.count_nonzero(
-                    agreement_maps(left, right, h, config, roi).support & own))
+                    agreement_maps(left, right, h, config, roi, peak=False).support & own))
                 if theirs * CHALLENGE_MARGIN > mine:
                     return None, None, ('ambiguous: a distinct plane explains its region '
                                         f'almost as well ({theirs} against {mine} supporting '
@@ -259,7 +259,7 @@ class Uniqueness:
         """Return the median residual flow (px, 0-d array) of the plane's refinement."""
         if self._flow is None:
             self._flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-        maps = agreement_maps(left, right, homography, config, roi)
+        maps = agreement_maps(left, right, homography, config, roi, peak=False)
         # A search's candidates are refined only once picked: the plane's photometric
         # refinement is measured, so that a true plane a few tenths of a pixel off (not yet
         # finished) is not refused; a fit through several surfaces stays one.
