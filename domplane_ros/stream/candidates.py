@@ -64,15 +64,6 @@ PHOTOMETRIC_FINISH_ROUNDS = 2
 # A refinement that moved the corners' predictions by less than this (median, pixels) has
 # settled: no second round (each costs a dense flow, about 100 ms CPU at 640 x 480).
 PHOTOMETRIC_SETTLED_PX = 0.3
-# A near miss's rescue (CandidateWork.rescued) may move the features' predictions by up to this
-# (median, pixels) from the near miss's own. The median runs over every feature, most of them
-# off the floor (walls, boxes) where a small change of the plane moves the prediction most:
-# on faint 1.28 m tiles (tuning seeds 203, 224, 239 with ``both``) near misses 3.0, 8.4 and
-# 3.6 px from the floor were refined onto it (0.1-0.2 px, verified) by a move of 4.4, 11.0
-# and 3.0 px, all refused at the polish's TIGHT_POLISH_MAX_MOVE_PX (2 px). A tile or plank
-# period is further: the refinement fits only samples whose residual flow is under
-# coarse.REFINE_NEAR_PX, and every round must raise the score.
-RESCUE_MAX_MOVE_PX = 16.0
 
 # A pair whose corners are too few to fix a plane (fewer than ``estimator.min_inliers``: a
 # large checker seen close up shows about ten) gets its planes from the photometric refinement
@@ -240,8 +231,8 @@ class CandidateWork:
         0.23 against the truth's 0.26-0.27). Up to :data:`PHOTOMETRIC_FINISH_ROUNDS` rounds at
         the finishing width, stopping at the first verified plane or a round that does not
         raise the score or that would put the features' predictions more than
-        :data:`RESCUE_MAX_MOVE_PX` (median) from the near miss's own: the rescue is for a
-        plane a few pixels off, not for one a tile period away. The caller picks among the results
+        :data:`TIGHT_POLISH_MAX_MOVE_PX` (median) from the near miss's own: the rescue is for a
+        plane a pixel off, not for one a tile period away. The caller picks among the results
         as usual (uniqueness, rivals).
         """
         start = estimate.homography
@@ -249,7 +240,7 @@ class CandidateWork:
             refined = self.trust.refined(step.left, step.right, estimate.homography,
                                          finish=True)
             if (refined is None or check_homography(refined)
-                    or _median_move(problem, start, refined) > RESCUE_MAX_MOVE_PX):
+                    or _median_move(problem, start, refined) > TIGHT_POLISH_MAX_MOVE_PX):
                 break
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
             if again.verification.score <= verdict.verification.score:

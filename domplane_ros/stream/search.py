@@ -69,11 +69,8 @@ DOUBT_SLOPE = 0.05
 # A search in doubt that still has no verified plane refines its near misses photometrically
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
 # little of the image, with at least NEAR_MISS_RATIO x verification.min_score. Measured: docs/
-# BENCHMARKS.md, trust round 8. 0.6 (was 0.8): with the default min_score 0.25 that is 0.15,
-# where the confidence is 0; on faint 1.28 m tiles a plane 3 px off the floor explains 0.18
-# where the floor explains 0.29 (seeds 35 and 203 with ``both``), and its rescue lands on the
-# floor. Measured: docs/BENCHMARKS.md, round 13 of the faint floors.
-NEAR_MISS_RATIO = 0.6
+# BENCHMARKS.md, trust round 8.
+NEAR_MISS_RATIO = 0.8
 NEAR_MISSES = 2
 
 __all__ = ['PlaneSearch', 'propagate']
