@@ -23,9 +23,16 @@ class Later:
         self._value = 0.0
 
     def value(self) -> float:
-        """Return the value, measured on the first call (its working arrays then let go)."""
-        if self._measure is not None:
-            self._value, self._measure = float(self._measure()), None
+        """Return the value, measured on the first call (its working arrays then let go).
+
+        Safe to call from several threads: the measurement is read once into a local, so a
+        thread that finds it gone takes the value another thread stored (two threads reading
+        at the same moment may both measure; the value is the same).
+        """
+        measure = self._measure
+        if measure is not None:
+            self._value = float(measure())
+            self._measure = None
         return self._value
 
     def __reduce__(self) -> tuple[Any, tuple[float]]:
@@ -34,7 +41,11 @@ class Later:
 
 
 class MeasuredWhenRead:
-    """A float field of a frozen dataclass that may hold a :class:`Later` (default 0.0)."""
+    """A float field of a frozen dataclass that may hold a :class:`Later` (default 0.0).
+
+    Reading the field (and so ``==``, ``hash``, ``repr``, ``dataclasses.replace`` and
+    ``asdict``) measures it; the instance's ``__dict__`` holds the :class:`Later` until then.
+    """
 
     def __set_name__(self, owner: type, name: str) -> None:
         # Kept under the field's own name: ``__dict__`` holds the fields, as without it.
@@ -43,7 +54,10 @@ class MeasuredWhenRead:
     def __get__(self, instance: Any, owner: type | None = None) -> float:
         if instance is None:
             return 0.0  # the dataclass default
-        value = instance.__dict__[self._slot]
+        try:
+            value = instance.__dict__[self._slot]
+        except KeyError:
+            raise AttributeError(self._slot) from None
         return value.value() if isinstance(value, Later) else value
 
     def __set__(self, instance: Any, value: float | Later) -> None:

@@ -75,7 +75,7 @@ Nothing here imports ROS; the functions take numpy arrays and return frozen valu
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import math
 import time
 from typing import Any, Callable, Sequence
@@ -181,7 +181,7 @@ class PlaneVerification:
             image, [0, 1].
         textured_fraction: Share of the region pixels that are textured, [0, 1].
         reason: Empty when accepted, else why not.
-        time_ms: Wall time of the call in milliseconds.
+        time_ms: Wall time of the call in milliseconds (a peak score read later not included).
         bottom_score: The score over the lowest :data:`BOTTOM_BAND` of the region only (its
             supporting share of the textured pixels there; 0 if none is textured), [0, 1].
             The ground seen from above fills the bottom of the image, so its plane explains
@@ -269,8 +269,8 @@ class AgreementMaps:
         inside: (h, w) bool windows that map inside the right image.
         support: (h, w) bool pixels supporting the plane uniquely.
         peak_support: (h, w) bool supporting pixels where the plane also beats the
-            :data:`PEAK_PROBES` (the pixels of ``peak_score``); None from ``_maps(...,
-            peak=False)``, which returns how to measure it instead.
+            :data:`PEAK_PROBES` (the pixels of ``peak_score``); None from
+            ``agreement_maps(..., peak=False)``.
         weight: (h, w) float32 what each pixel counts in the scores: 0 where not textured,
             else 1 or, with ``weight_by_contrast``, ``1 / max(std, min_texture)``.
     """
@@ -493,8 +493,17 @@ def verify_plane(left: np.ndarray, right: np.ndarray, homography: np.ndarray,
     if not own_region:
         return verdict
     score, fraction = region_support(maps)
-    return replace(verdict, region_score=score, region_fraction=fraction,
+    return updated(verdict, region_score=score, region_fraction=fraction,
                    time_ms=1000.0 * (time.perf_counter() - start))
+
+
+def updated(verification: PlaneVerification, **changes: Any) -> PlaneVerification:
+    """Return ``dataclasses.replace(verification, **changes)`` with its peak score unread.
+
+    ``replace`` reads every field, which would measure a pending peak score
+    (:class:`~domplane_ros.core.later.Later`); this copies it as it is.
+    """
+    return PlaneVerification(**{**verification.__dict__, **changes})
 
 
 def own_region(maps: AgreementMaps, close_px: int = REGION_CLOSE_PX) -> np.ndarray:

@@ -37,7 +37,6 @@ board covering a fifth of a textured room).
 from __future__ import annotations
 
 from collections import deque
-from dataclasses import replace
 import statistics
 from typing import Any, Callable, Generator, Hashable, Sequence
 
@@ -47,8 +46,9 @@ from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, PlaneVerification,
-                                            REASON_LOW_SUPPORT, VerificationConfig,
-                                            verify_plane, working_pair, WorkingPair)
+                                            REASON_LOW_SUPPORT, updated,
+                                            VerificationConfig, verify_plane, working_pair,
+                                            WorkingPair)
 from domplane_ros.stream.uniqueness import Judged, Pick, Uniqueness
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
 import numpy as np
@@ -292,7 +292,7 @@ class TrustGate:
             # nearly all of its own region's.
             confidence = 0.5 + 0.5 * (check.region_score - MIN_REGION_SCORE) / (
                 1.0 - MIN_REGION_SCORE)
-            check = replace(check, accepted=True, reason='',
+            check = updated(check, accepted=True, reason='',
                             confidence=float(np.clip(confidence, 0.5, 1.0)))
         if not check.accepted:
             return Verdict(False, check, f'plane not verified: {check.reason} (score '

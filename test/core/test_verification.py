@@ -317,6 +317,26 @@ def test_the_peak_score_is_measured_when_first_read(monkeypatch: pytest.MonkeyPa
         calls.clear()
 
 
+def test_the_own_region_and_an_update_leave_the_peak_score_unread(
+        monkeypatch: pytest.MonkeyPatch) -> None:
+    """``own_region`` and :func:`verification.updated` copy a pending peak score unread."""
+    from domplane_ros.sim.generators import random_scene
+    frame = random_scene(2)
+    config = _gate_config(frame.left.shape[1])
+    calls = []
+    ncc = verification._ncc
+    monkeypatch.setattr(verification, '_ncc', lambda *args: calls.append(1) or ncc(*args))
+    check = verification.verify_plane(frame.left, frame.right, frame.homography, config,
+                                      own_region=True)
+    assert check.region_fraction > 0.0
+    moved = verification.updated(check, accepted=False, reason='test')
+    assert len(calls) == 1 + len(verification.PROBES)
+    assert moved.reason == 'test' and moved.region_score == check.region_score
+    assert moved.peak_score == check.peak_score > 0.0
+    # The copy shares the pending measurement: measured once for both.
+    assert len(calls) == 1 + len(verification.PROBES) + len(verification.PEAK_PROBES)
+
+
 def test_agreement_maps_without_the_peak_on_the_shared_pair_are_the_same() -> None:
     """``peak=False`` and a shared working pair change none of the other maps."""
     import dataclasses
