@@ -45,7 +45,7 @@ from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
 from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import (agreement_maps, PlaneVerification,
+from domplane_ros.core.verification import (agreement_maps, AgreementMaps, PlaneVerification,
                                             REASON_LOW_SUPPORT, updated,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
@@ -131,7 +131,7 @@ class TrustGate:
         self._working: WorkingPair | None = None
         self._coarse_planes: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
-        self._uniqueness = Uniqueness(self._coarse, self._per_pair)
+        self._uniqueness = Uniqueness(self._coarse, self._per_pair, self._maps)
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
         """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
@@ -158,16 +158,28 @@ class TrustGate:
             self._coarse_planes[key] = compute()
         return self._coarse_planes[key]
 
+    def _working_for(self, left: np.ndarray, right: np.ndarray,
+                     config: VerificationConfig) -> WorkingPair | None:
+        """Return the pair of :meth:`begin_pair` shrunk once for ``config``; None for others."""
+        if self._pair is None or self._pair[0] is not left or self._pair[1] is not right:
+            return None
+        if self._working is None or self._working.width != config.working_width_px:
+            self._working = working_pair(left, right, config)
+        return self._working
+
+    def _maps(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
+              roi: Sequence[float] | None) -> AgreementMaps:
+        """Return a plane's agreement maps without the peak probes (for the pick's rules)."""
+        config = self.config(left.shape[1])
+        return agreement_maps(left, right, homography, config, roi,
+                              self._working_for(left, right, config), peak=False)
+
     def _verify(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
                 roi: Sequence[float] | None) -> PlaneVerification:
         config = self.config(left.shape[1])
-        working = None
-        if self._pair is not None and self._pair[0] is left and self._pair[1] is right:
-            if self._working is None or self._working.width != config.working_width_px:
-                self._working = working_pair(left, right, config)
-            working = self._working
-        else:
-            return verify_plane(left, right, homography, config, roi, working,
+        working = self._working_for(left, right, config)
+        if working is None:
+            return verify_plane(left, right, homography, config, roi, None,
                                 **self._own_region)
         # The same plane judged twice on one pair (a search picked again with its rivals
         # refined further, a finished plane that did not move) is verified once.
@@ -384,8 +396,7 @@ class TrustGate:
         cached = self._coarse_planes.get(key) if same else None
         if cached is not None:
             return list(cached)
-        config = self.config(left.shape[1])
-        maps = agreement_maps(left, right, homography, config, roi, peak=False)
+        maps = self._maps(left, right, homography, roi)
         scale = left.shape[1] / maps.left.shape[1]
         vectors = scale * period_vectors(maps.left, maps.support)
         shifts = list(vectors)
@@ -455,7 +466,7 @@ class TrustGate:
                        for rival in rival_planes or []]
             pick = (self._uniqueness.any_winner if self.settings.plane == 'any'
                     else self._uniqueness.ground_winner)
-            return pick(left, right, judged, verified, roi, self.config(width))
+            return pick(left, right, judged, verified, roi)
         if swapped:
             # The image is explained better by a plane of swapped cameras: what passes the
             # ground check is a look-alike (measured: a checker floor one period off).

@@ -33,7 +33,7 @@ import cv2
 from domplane_ros.core.coarse import CoarseAligner
 from domplane_ros.core.flatness import one_plane_residual_px
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import agreement_maps, own_region, VerificationConfig
+from domplane_ros.core.verification import AgreementMaps, own_region
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, distinct_planes, is_rival, Verdict
 import numpy as np
 
@@ -70,6 +70,10 @@ Pick = tuple[PlaneEstimate | None, Verdict | None, str]
 # The gate's memo for the pair of TrustGate.begin_pair: (left, right, key, compute) ->
 # compute(), computed once per key for that pair (every time for other images).
 PerPair = Callable[[np.ndarray, np.ndarray, Hashable, Callable[[], np.ndarray]], np.ndarray]
+# The gate's agreement maps of a plane on a pair, without the peak probes, at the gate's
+# verification settings (on the pair's once-shrunk images between begin_pair and end_pair):
+# (left, right, homography, roi) -> AgreementMaps.
+Maps = Callable[[np.ndarray, np.ndarray, np.ndarray, Sequence[float] | None], AgreementMaps]
 
 
 class Uniqueness:
@@ -78,18 +82,19 @@ class Uniqueness:
     Args:
         coarse: The gate's photometric alignment (residual parallax, refinement).
         per_pair: The gate's memo for the pair of ``begin_pair`` (:data:`PerPair`).
+        maps: The gate's agreement maps of a plane (:data:`Maps`).
 
     """
 
-    def __init__(self, coarse: CoarseAligner, per_pair: PerPair) -> None:
-        """Keep the gate's aligner and memo; the optical flow is made when first needed."""
+    def __init__(self, coarse: CoarseAligner, per_pair: PerPair, maps: Maps) -> None:
+        """Keep the gate's aligner, memo and maps; the optical flow is made when first needed."""
         self._coarse = coarse
         self._per_pair = per_pair
+        self._maps = maps
         self._flow: cv2.DISOpticalFlow | None = None
 
     def ground_winner(self, left: np.ndarray, right: np.ndarray, judged: list[Judged],
-                      verified: list[Judged], roi: Sequence[float] | None,
-                      config: VerificationConfig) -> Pick:
+                      verified: list[Judged], roi: Sequence[float] | None) -> Pick:
         """Return the pick of ``verification.plane: ground``: the best verified plane if unique.
 
         Args:
@@ -98,7 +103,6 @@ class Uniqueness:
             judged: Every plane judged on the pair, rivals included.
             verified: The accepted ones among them (not empty).
             roi: Region of the left image (fractions), as ``features.roi``.
-            config: The gate's verification settings for this width.
 
         Returns:
             The winner and its verdict (uniqueness and ``contested`` set), or None, None and
@@ -114,7 +118,7 @@ class Uniqueness:
         verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
                           contested=any(not swapped for _, swapped in rival_scores))
         if verdict.uniqueness >= CHALLENGE_MARGIN:
-            shared = self.shared_rival(left, right, best_h, verdict, judged, roi, config)
+            shared = self.shared_rival(left, right, best_h, verdict, judged, roi)
             if shared:
                 return None, None, shared
             return best, verdict, ''
@@ -124,8 +128,8 @@ class Uniqueness:
                             f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
 
     def shared_rival(self, left: np.ndarray, right: np.ndarray, best_h: np.ndarray,
-                     verdict: Verdict, judged: list[Judged], roi: Sequence[float] | None,
-                     config: VerificationConfig) -> str:
+                     verdict: Verdict, judged: list[Judged], roi: Sequence[float] | None
+                     ) -> str:
         """Return why the winner is ambiguous on the pixels it shares with a rival ('' if not).
 
         See :data:`SHARED_RIVAL_SHARE`. Compared with every distinct ground plane of this head
@@ -140,9 +144,9 @@ class Uniqueness:
                   and distinct_planes(h, best_h, width, height)]
         if not rivals:
             return ''
-        mine = agreement_maps(left, right, best_h, config, roi, peak=False)
+        mine = self._maps(left, right, best_h, roi)
         for h in rivals:
-            theirs = agreement_maps(left, right, h, config, roi, peak=False)
+            theirs = self._maps(left, right, h, roi)
             both = mine.inside & theirs.inside
             # Each pixel counts as in the score (core/verification.py, step 5).
             ours = float(mine.weight[mine.support & both].sum(dtype=np.float64))
@@ -185,8 +189,7 @@ class Uniqueness:
             self._coarse.beyond_share(left, right, homography, swapped))))
 
     def any_winner(self, left: np.ndarray, right: np.ndarray, judged: list[Judged],
-                   verified: list[Judged], roi: Sequence[float] | None,
-                   config: VerificationConfig) -> Pick:
+                   verified: list[Judged], roi: Sequence[float] | None) -> Pick:
         """Return the pick of ``verification.plane: any``.
 
         The verified planes are taken by peak score; one that is not one plane
@@ -204,7 +207,7 @@ class Uniqueness:
         height, width = left.shape
         several = ''
         for best, best_h, verdict in sorted(verified, key=lambda item: -item[2].peak_score):
-            several = self.several_planes(left, right, best_h, roi, config)
+            several = self.several_planes(left, right, best_h, roi)
             if several:
                 continue
             least = verdict.score / CHALLENGE_MARGIN
@@ -212,19 +215,19 @@ class Uniqueness:
                       if is_rival(v, h, best_h, width, height, rows=0.0)]
             top = max((v.score for h, v in rivals
                        if v.score <= least
-                       or not self.several_planes(left, right, h, roi, config)),
+                       or not self.several_planes(left, right, h, roi)),
                       default=0.0)
             verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf)
             if verdict.uniqueness < CHALLENGE_MARGIN:
                 return None, None, ('ambiguous: a distinct plane explains the image almost '
                                     f'as well (score {top:.2f} against {verdict.score:.2f} < '
                                     f'{CHALLENGE_MARGIN:g} x; a periodic board?)')
-            maps = agreement_maps(left, right, best_h, config, roi, peak=False)
+            maps = self._maps(left, right, best_h, roi)
             own = own_region(maps)
             mine = int(np.count_nonzero(maps.support & own))
             for h, _ in rivals:
                 theirs = int(np.count_nonzero(
-                    agreement_maps(left, right, h, config, roi, peak=False).support & own))
+                    self._maps(left, right, h, roi).support & own))
                 if theirs * CHALLENGE_MARGIN > mine:
                     return None, None, ('ambiguous: a distinct plane explains its region '
                                         f'almost as well ({theirs} against {mine} supporting '
@@ -233,7 +236,7 @@ class Uniqueness:
         return None, None, several
 
     def several_planes(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                       roi: Sequence[float] | None, config: VerificationConfig) -> str:
+                       roi: Sequence[float] | None) -> str:
         """Return why a winner of ``verification.plane: any`` is no one plane ('' if it is).
 
         A plane fitted through surfaces at several depths (the far field of a room) passes
@@ -246,7 +249,7 @@ class Uniqueness:
         """
         key = ('flow', np.asarray(homography, np.float64).tobytes())
         residual = float(self._per_pair(left, right, key, lambda: self._residual_flow(
-            left, right, homography, roi, config)))
+            left, right, homography, roi)))
         if residual <= MAX_RESIDUAL_FLOW_PX:
             return ''
         return (f'not one plane: its supporting pixels are {residual:.2f} px off it '
@@ -255,11 +258,11 @@ class Uniqueness:
                 'room behind a small board?')
 
     def _residual_flow(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                       roi: Sequence[float] | None, config: VerificationConfig) -> np.ndarray:
+                       roi: Sequence[float] | None) -> np.ndarray:
         """Return the median residual flow (px, 0-d array) of the plane's refinement."""
         if self._flow is None:
             self._flow = cv2.DISOpticalFlow_create(cv2.DISOPTICAL_FLOW_PRESET_MEDIUM)
-        maps = agreement_maps(left, right, homography, config, roi, peak=False)
+        maps = self._maps(left, right, homography, roi)
         # A search's candidates are refined only once picked: the plane's photometric
         # refinement is measured, so that a true plane a few tenths of a pixel off (not yet
         # finished) is not refused; a fit through several surfaces stays one.

@@ -175,10 +175,10 @@ def test_a_look_alike_loses_in_its_region_to_the_board_even_if_the_board_is_no_o
     assert gate.judge(frame.left, frame.right, alike).accepted
     real = Uniqueness.several_planes
 
-    def board_is_no_one_plane(self, left, right, homography, roi, config):
+    def board_is_no_one_plane(self, left, right, homography, roi):
         if np.allclose(homography, frame.homography):
             return 'not one plane (by the test)'
-        return real(self, left, right, homography, roi, config)
+        return real(self, left, right, homography, roi)
 
     monkeypatch.setattr(Uniqueness, 'several_planes', board_is_no_one_plane)
     planes = [photometric_estimate(alike), photometric_estimate(frame.homography)]
