@@ -63,7 +63,7 @@ import time
 from typing import Any, Callable
 
 from domplane_ros.config import load_params_file, PlaneNodeConfig
-from domplane_ros.errors import BagError, ConfigError
+from domplane_ros.errors import BagError, clip_text, ConfigError
 from domplane_ros.replay.reader import (BagInput, BagReadError, describe_error, header_stamp_ns,
                                         ReplayedFrame, ReplaySession)
 from domplane_ros.replay.report import CsvOutput, PROG, ReplaySummary
@@ -148,7 +148,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     t_start = time.perf_counter()
     with BagInput(paths.input_bag, left_topic, right_topic) as bag:
         run = _Run(bag, paths, config if config is not None else PlaneNodeConfig(),
-                   (left_topic, right_topic), storage or bag.storage, force, progress,
+                   bag.sides_topics(), storage or bag.storage, force, progress,
                    debug_images, parallax)
         try:
             run.execute(on_frame, strict, keep_partial)
@@ -188,6 +188,8 @@ class _RunPaths:
                 if path is not None and (path.exists() or path.is_symlink()):
                     raise BagError(f'{str(path)!r} exists (where --keep-partial would put a '
                                    'partial output); use --force to replace it')
+        if keep_partial:
+            _check_replaceable(paths.incomplete)
         return paths
 
 
@@ -202,9 +204,16 @@ class _Run:
         self.summary = ReplaySummary(str(paths.input_bag), str(paths.output_bag), storage)
         self.session = ReplaySession(config, topics)
         self.clock = DiagnosticsClock(config.transport.diagnostics_period_s)
-        self.output = BagOutput(paths.output_bag, storage, replace=force,
-                                debug_images=debug_images, parallax=parallax)
-        self.table = CsvOutput(paths.csv) if paths.csv is not None else None
+        self.output = _create(paths.output_bag, 'output bag', lambda: BagOutput(
+            paths.output_bag, storage, replace=force, debug_images=debug_images,
+            parallax=parallax))
+        self.table = None
+        if paths.csv is not None:
+            try:
+                self.table = _create(paths.csv, 'CSV file', lambda: CsvOutput(paths.csv))
+            except BaseException:
+                self.output.abort()   # no hidden partial bag left behind
+                raise
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
         self._noted = 0     # undecodable messages given to the session so far
@@ -335,6 +344,26 @@ class _Run:
         return summary
 
 
+def _create(path: Path, what: str, make: Callable[[], Any]) -> Any:
+    """Return ``make()``; an OSError (a read-only or missing folder) refuses the run.
+
+    Raises:
+        BagError: Naming ``path`` and the problem (nothing is written; exit code 2).
+
+    """
+    try:
+        return make()
+    except BagError:
+        raise
+    except OSError as err:
+        problem = err.strerror or describe_error(err)
+        failed = Path(str(err.filename)) if err.filename else None
+        if failed is not None and '.partial' in failed.name:
+            failed = failed.parent   # the hidden temporary file: name its folder instead
+        where = f' ({str(failed)!r})' if failed is not None else ''
+        raise BagError(f'cannot create the {what} {str(path)!r}: {problem}{where}') from err
+
+
 def input_bag_folder(input_bag: Path) -> Path:
     """Return the folder an input bag occupies, resolved: nothing may be written inside it.
 
@@ -361,6 +390,7 @@ def _check_paths(input_bag: Path, output_bag: Path, csv_path: Path | None,
                        f'{str(input_bag)!r} (its folder {str(in_res)!r})')
     if (output_bag.exists() or output_bag.is_symlink()) and not force:
         raise BagError(f'output {str(output_bag)!r} exists; use --force to replace it')
+    _check_replaceable(output_bag)
     if csv_path is not None:
         if (csv_path.resolve().is_relative_to(in_res) or csv_path.resolve() == out_res
                 or csv_path.resolve().is_relative_to(out_res)):
@@ -369,6 +399,32 @@ def _check_paths(input_bag: Path, output_bag: Path, csv_path: Path | None,
             raise BagError(f'CSV file {str(csv_path)!r} exists; use --force to replace it')
         if csv_path.is_dir():
             raise BagError(f'CSV file {str(csv_path)!r} is a directory')
+
+
+# What a rosbag2 folder holds: --force replaces a folder of these files only.
+_BAG_FILE_SUFFIXES = ('.db3', '.mcap', '.db3-shm', '.db3-wal', '.db3-journal')
+
+
+def _check_replaceable(path: Path) -> None:
+    """Refuse (BagError) to replace anything at ``path`` but a bag, an empty folder or a link.
+
+    ``--force`` replaces an earlier output; a folder that holds other files (a typo'd
+    OUTPUT_BAG such as ``~/data``), or a regular file, would be deleted with it.
+    """
+    if path.is_symlink() or not path.exists():
+        return   # replacing a link moves the link aside, not what it points to
+    if not path.is_dir():
+        raise BagError(f'output {str(path)!r} is a file, not a bag folder; --force only '
+                       'replaces a bag (remove it yourself or choose another OUTPUT_BAG)')
+    others = sorted(entry.name for entry in path.iterdir()
+                    if not (entry.is_file() and (entry.name == 'metadata.yaml'
+                                                 or entry.name.endswith(_BAG_FILE_SUFFIXES))))
+    if others:
+        listed = ', '.join(repr(clip_text(name, 60)) for name in others[:3])
+        more = f' and {len(others) - 3} more' if len(others) > 3 else ''
+        raise BagError(f'output {str(path)!r} is not a bag (it holds {listed}{more}); '
+                       '--force only replaces a bag (metadata.yaml and .db3 or .mcap files): '
+                       'remove it yourself or choose another OUTPUT_BAG')
 
 
 class _NoBar:

@@ -217,8 +217,9 @@ class BagInput:
 
     Args:
         path: The bag folder (with metadata.yaml) or a single ``.db3`` or ``.mcap`` file.
-        left_topic: Left image topic.
-        right_topic: Right image topic.
+        left_topic: Left image topic; a relative name (``left/image_raw``) finds
+            ``/left/image_raw``, as a node in the root namespace resolves it.
+        right_topic: Right image topic (relative names as for ``left_topic``).
 
     Raises:
         BagError: If the bag does not exist or cannot be opened, or a topic is missing or is
@@ -257,6 +258,8 @@ class BagInput:
                 listing += f' and {len(image_topics) - 10} more'
             self.sides: dict[str, Side] = {}
             for side, topic in (('left', left_topic), ('right', right_topic)):
+                if topic not in topics and '/' + topic in topics:
+                    topic = '/' + topic   # a relative name, as the node's are: 'left/image_raw'
                 if topic not in topics:
                     raise BagError(f'{side} topic {topic!r} is not in bag {str(self.path)!r}; '
                                    f'image topics in the bag: {listing}')
@@ -266,7 +269,7 @@ class BagInput:
                                    f'{IMAGE_TYPE} or {COMPRESSED_IMAGE_TYPE}; image topics '
                                    f'in the bag: {listing}')
                 self.sides[topic] = side
-            if left_topic == right_topic:
+            if len(self.sides) < 2:
                 raise BagError(f'left and right topics are the same: {left_topic!r}')
             self.connections = [c for c in self._reader.connections if c.topic in self.sides]
             self.counts = {side: sum(c.msgcount for c in self.connections
