@@ -40,7 +40,7 @@ from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterException)
+                              ParameterException, ParameterNotDeclaredException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -50,6 +50,14 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from std_msgs.msg import Float64MultiArray
 
 _THROTTLE_S = 5.0
+
+
+class UnknownParameterError(ParameterNotDeclaredException):
+    """A parameter that is not declared was set; the message names the nearest declared one."""
+
+    def __init__(self, name: str) -> None:
+        """Make the error of the undeclared parameter ``name``."""
+        Exception.__init__(self, unknown_parameter_message(name))
 
 
 def _stamp_ns(msg: Any) -> int:
@@ -172,6 +180,15 @@ class PlaneNode(Node):
             values[spec.name] = check_value(spec, _plain(value))
         self._check_unknown_overrides()
         return values
+
+    def _check_undeclared_parameters(self, parameter_list: list[Parameter]) -> None:
+        # rclpy's own check, run before any set-parameters callback, refuses an undeclared
+        # name with 'Invalid access to undeclared parameter(s): []' (its generator is spent
+        # by then). ros2 param set gets this reason instead: the name and the nearest one.
+        for param in parameter_list:
+            if isinstance(param, Parameter) and not self.has_parameter(param.name):
+                raise UnknownParameterError(param.name)
+        super()._check_undeclared_parameters(parameter_list)
 
     def _check_unknown_overrides(self) -> None:
         overrides = getattr(self, '_parameter_overrides', {}) or {}
