@@ -36,8 +36,9 @@ not give (undecodable payloads: skipped, counted, named on stderr and recorded i
 the end but gave no pair to process (no messages on a topic, none paired, none decoded): the
 summary says "no pairs" and why, and nothing is written; 2 when the run is refused
 before anything is written (missing, unreadable or truncated bag, a folder without
-metadata.yaml, unknown topic, existing output without ``--force``, an output inside the input
-bag's folder, invalid params file); 1 when reading or writing fails part-way (a damaged bag,
+metadata.yaml, unknown topic, existing output without ``--force`` or, with it, one that is not
+a bag, an output inside the input bag's folder or in one that cannot be written, invalid params
+file); 1 when reading or writing fails part-way (a damaged bag,
 a full disk): the partial output is removed, or on a read failure with ``--keep-partial``
 kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its metadata); 130 on
 Ctrl-C and 143 on SIGTERM, the partial output removed. Every error is one line on stderr.
@@ -46,26 +47,26 @@ The output is written into a hidden temporary folder next to ``OUTPUT_BAG`` and 
 place only when it is complete, so an interrupted run never leaves a bag that looks complete.
 
 The package imports ``rosbags`` but not ``rclpy``: :mod:`~domplane_ros.replay.reader` reads
-and pairs, :mod:`~domplane_ros.replay.writer` writes the bag, :mod:`~domplane_ros.replay.report`
-the CSV file and the summary; the session, pipeline, pairing and decoding are the ones the live
+and pairs, :mod:`~domplane_ros.replay.paths` checks where the run writes,
+:mod:`~domplane_ros.replay.writer` writes the bag, :mod:`~domplane_ros.replay.report` the CSV
+file and the summary; the session, pipeline, pairing and decoding are the ones the live
 node uses. This module parses the command line and runs the replay.
 """
 
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
 import os
-from pathlib import Path
 import signal
 import sys
 import time
 from typing import Any, Callable
 
 from domplane_ros.config import load_params_file, PlaneNodeConfig
-from domplane_ros.errors import BagError, clip_text, ConfigError
-from domplane_ros.replay.reader import (BagInput, BagReadError, describe_error, header_stamp_ns,
-                                        ReplayedFrame, ReplaySession)
+from domplane_ros.errors import BagError, ConfigError
+from domplane_ros.replay.paths import create_output, RunPaths
+from domplane_ros.replay.reader import (BagInput, BagReadError, CAMERA_INFO, describe_error,
+                                        header_stamp_ns, ReplayedFrame, ReplaySession)
 from domplane_ros.replay.report import CsvOutput, PROG, ReplaySummary
 from domplane_ros.replay.writer import (BagOutput, BagWriteError, DiagnosticsClock,
                                         keep_partial, set_run_metadata, STORAGES)
@@ -144,11 +145,13 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     """
     if storage is not None and storage not in STORAGES:
         raise ValueError(f'storage must be one of {", ".join(STORAGES)}, got {storage!r}')
-    paths = _RunPaths.check(input_bag, output_bag, csv_path, force, keep_partial)
+    paths = RunPaths.check(input_bag, output_bag, csv_path, force, keep_partial)
     t_start = time.perf_counter()
-    with BagInput(paths.input_bag, left_topic, right_topic) as bag:
-        run = _Run(bag, paths, config if config is not None else PlaneNodeConfig(),
-                   bag.sides_topics(), storage or bag.storage, force, progress,
+    config = config if config is not None else PlaneNodeConfig()
+    with BagInput(paths.input_bag, left_topic, right_topic,
+                  config.transport.camera_info_topic) as bag:
+        run = _Run(bag, paths, config, bag.sides_topics(), storage or bag.storage, force,
+                   progress,
                    debug_images, parallax)
         try:
             run.execute(on_frame, strict, keep_partial)
@@ -159,44 +162,10 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     return run.summarise(time.perf_counter() - t_start)
 
 
-@dataclass(frozen=True)
-class _RunPaths:
-    """Where a run reads and writes, checked before anything is written."""
-
-    input_bag: Path
-    output_bag: Path
-    csv: Path | None
-    incomplete: Path          # where --keep-partial puts a partial bag
-    csv_incomplete: Path | None
-
-    @classmethod
-    def check(cls, input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[str],
-              csv_path: str | os.PathLike[str] | None, force: bool,
-              keep_partial: bool) -> _RunPaths:
-        """Return the paths, or raise BagError if the run must be refused."""
-        input_path, output_path = Path(input_bag), Path(output_bag)
-        csv_file = Path(csv_path) if csv_path is not None else None
-        if not input_path.exists():
-            raise BagError(f'input bag {str(input_path)!r} does not exist')
-        _check_paths(input_path, output_path, csv_file, force)
-        paths = cls(input_path, output_path, csv_file,
-                    output_path.with_name(output_path.name + '.incomplete'),
-                    (csv_file.with_name(csv_file.name + '.incomplete')
-                     if csv_file is not None else None))
-        if keep_partial and not force:
-            for path in (paths.incomplete, paths.csv_incomplete):
-                if path is not None and (path.exists() or path.is_symlink()):
-                    raise BagError(f'{str(path)!r} exists (where --keep-partial would put a '
-                                   'partial output); use --force to replace it')
-        if keep_partial:
-            _check_replaceable(paths.incomplete)
-        return paths
-
-
 class _Run:
     """One replay's open outputs and its session, from the first message to the summary."""
 
-    def __init__(self, bag: BagInput, paths: _RunPaths, config: PlaneNodeConfig,
+    def __init__(self, bag: BagInput, paths: RunPaths, config: PlaneNodeConfig,
                  topics: tuple[str, str], storage: str, force: bool, progress: bool,
                  debug_images: bool = False, parallax: bool = False) -> None:
         self.bag = bag
@@ -204,19 +173,24 @@ class _Run:
         self.summary = ReplaySummary(str(paths.input_bag), str(paths.output_bag), storage)
         self.session = ReplaySession(config, topics)
         self.clock = DiagnosticsClock(config.transport.diagnostics_period_s)
-        self.output = _create(paths.output_bag, 'output bag', lambda: BagOutput(
+        self.output = create_output(paths.output_bag, 'output bag', lambda: BagOutput(
             paths.output_bag, storage, replace=force, debug_images=debug_images,
             parallax=parallax))
         self.table = None
         if paths.csv is not None:
             try:
-                self.table = _create(paths.csv, 'CSV file', lambda: CsvOutput(paths.csv))
+                self.table = create_output(paths.csv, 'CSV file', lambda: CsvOutput(paths.csv))
             except BaseException:
                 self.output.abort()   # no hidden partial bag left behind
                 raise
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
         self._noted = 0     # undecodable messages given to the session so far
+        self.summary.notes = list(bag.notes)
+        if config.head.joint_states_topic:
+            self.summary.notes.append(
+                f'head.joint_states_topic {config.head.joint_states_topic!r} is not replayed: '
+                "the joints' hint to expect a big change is the live node's only")
 
     def execute(self, on_frame: Callable[[ReplayedFrame], None] | None, strict: bool,
                 keep: bool) -> None:
@@ -224,6 +198,9 @@ class _Run:
         try:
             for item in self.bag.messages():
                 self._take_undecodable(strict)
+                if item.side == CAMERA_INFO:
+                    self._note(self.session.apply_camera_info(item.msg))
+                    continue
                 self._write_diagnostics(self.clock.tick(header_stamp_ns(item.msg)))
                 self._count_message(item.side)
                 for frame in self.session.add(item.side, item.msg):
@@ -244,6 +221,11 @@ class _Run:
             self.bar.close()
             self._abort()
             raise
+
+    def _note(self, note: str) -> None:
+        """Keep a note for the summary (each text once, at most 5)."""
+        if note and note not in self.summary.notes and len(self.summary.notes) < 5:
+            self.summary.notes.append(note)
 
     def _check_pairs(self) -> None:
         """Refuse to commit an output that holds no processed pair (NoPairsError)."""
@@ -344,89 +326,6 @@ class _Run:
         return summary
 
 
-def _create(path: Path, what: str, make: Callable[[], Any]) -> Any:
-    """Return ``make()``; an OSError (a read-only or missing folder) refuses the run.
-
-    Raises:
-        BagError: Naming ``path`` and the problem (nothing is written; exit code 2).
-
-    """
-    try:
-        return make()
-    except BagError:
-        raise
-    except OSError as err:
-        problem = err.strerror or describe_error(err)
-        failed = Path(str(err.filename)) if err.filename else None
-        if failed is not None and '.partial' in failed.name:
-            failed = failed.parent   # the hidden temporary file: name its folder instead
-        where = f' ({str(failed)!r})' if failed is not None else ''
-        raise BagError(f'cannot create the {what} {str(path)!r}: {problem}{where}') from err
-
-
-def input_bag_folder(input_bag: Path) -> Path:
-    """Return the folder an input bag occupies, resolved: nothing may be written inside it.
-
-    A bag folder is itself; a storage file inside a bag folder (its folder holds
-    ``metadata.yaml``, or the file is named after its folder as rosbag2 names them,
-    ``NAME/NAME_0.db3``) is that folder; a storage file on its own is the file.
-    """
-    resolved = input_bag.resolve()
-    if resolved.is_dir():
-        return resolved
-    folder = resolved.parent
-    if (folder / 'metadata.yaml').exists() or resolved.name.startswith(folder.name + '_'):
-        return folder
-    return resolved
-
-
-def _check_paths(input_bag: Path, output_bag: Path, csv_path: Path | None,
-                 force: bool) -> None:
-    in_res = input_bag_folder(input_bag)
-    out_res = output_bag.resolve()
-    if (out_res == in_res or in_res.is_relative_to(out_res) or out_res.is_relative_to(in_res)
-            or input_bag.resolve().is_relative_to(out_res)):
-        raise BagError(f'output {str(output_bag)!r} would overwrite or nest in the input bag '
-                       f'{str(input_bag)!r} (its folder {str(in_res)!r})')
-    if (output_bag.exists() or output_bag.is_symlink()) and not force:
-        raise BagError(f'output {str(output_bag)!r} exists; use --force to replace it')
-    _check_replaceable(output_bag)
-    if csv_path is not None:
-        if (csv_path.resolve().is_relative_to(in_res) or csv_path.resolve() == out_res
-                or csv_path.resolve().is_relative_to(out_res)):
-            raise BagError(f'CSV file {str(csv_path)!r} would overwrite a bag')
-        if csv_path.exists() and not force:
-            raise BagError(f'CSV file {str(csv_path)!r} exists; use --force to replace it')
-        if csv_path.is_dir():
-            raise BagError(f'CSV file {str(csv_path)!r} is a directory')
-
-
-# What a rosbag2 folder holds: --force replaces a folder of these files only.
-_BAG_FILE_SUFFIXES = ('.db3', '.mcap', '.db3-shm', '.db3-wal', '.db3-journal')
-
-
-def _check_replaceable(path: Path) -> None:
-    """Refuse (BagError) to replace anything at ``path`` but a bag, an empty folder or a link.
-
-    ``--force`` replaces an earlier output; a folder that holds other files (a typo'd
-    OUTPUT_BAG such as ``~/data``), or a regular file, would be deleted with it.
-    """
-    if path.is_symlink() or not path.exists():
-        return   # replacing a link moves the link aside, not what it points to
-    if not path.is_dir():
-        raise BagError(f'output {str(path)!r} is a file, not a bag folder; --force only '
-                       'replaces a bag (remove it yourself or choose another OUTPUT_BAG)')
-    others = sorted(entry.name for entry in path.iterdir()
-                    if not (entry.is_file() and (entry.name == 'metadata.yaml'
-                                                 or entry.name.endswith(_BAG_FILE_SUFFIXES))))
-    if others:
-        listed = ', '.join(repr(clip_text(name, 60)) for name in others[:3])
-        more = f' and {len(others) - 3} more' if len(others) > 3 else ''
-        raise BagError(f'output {str(path)!r} is not a bag (it holds {listed}{more}); '
-                       '--force only replaces a bag (metadata.yaml and .db3 or .mcap files): '
-                       'remove it yourself or choose another OUTPUT_BAG')
-
-
 class _NoBar:
     enabled = False
 
@@ -475,7 +374,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--storage', choices=sorted(STORAGES),
                         help="output storage (default: the input's)")
     parser.add_argument('--force', action='store_true',
-                        help='replace an existing OUTPUT_BAG (and --csv file)')
+                        help='replace an existing OUTPUT_BAG (only a bag: metadata.yaml and '
+                             '.db3/.mcap files) and --csv file')
     parser.add_argument('--csv', metavar='FILE',
                         help='write one CSV row per processed pair to FILE')
     parser.add_argument('--keep-partial', action='store_true',

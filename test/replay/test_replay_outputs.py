@@ -2,15 +2,23 @@
 
 Found by the session-13 audit (docs/HARDENING.md, "Audit (session 13)"): ``--force`` deleted
 any folder or file given as OUTPUT_BAG; a ``--csv`` file that could not be created left the
-hidden partial bag folder behind; and a topic given as the node names it (``left/image_raw``)
-was not found in a bag that records it as ``/left/image_raw``.
+hidden partial bag folder behind; a topic given as the node names it (``left/image_raw``)
+was not found in a bag that records it as ``/left/image_raw``; and the replay ignored
+``camera_info.topic``, which narrows the node's prior.
 """
 
 from __future__ import annotations
 
-from bag_helpers import read_bag, tree, write_bag
-from domplane_ros.replay.cli import EXIT_OK, EXIT_REFUSED, main
+from dataclasses import replace
+
+from bag_helpers import (_header, image_msg, LEFT, left_stamp, read_bag, RIGHT, T, tree, TS,
+                         write_bag)
+from domplane_ros.config import load_params_file
+from domplane_ros.replay.cli import EXIT_OK, EXIT_REFUSED, main, run_replay
+from domplane_ros.stream.pipeline import PlanePipeline
+import numpy as np
 import pytest
+from rosbags.rosbag2 import StoragePlugin, Writer
 
 
 @pytest.fixture
@@ -92,3 +100,60 @@ def test_relative_topic_names_find_the_bags_absolute_topics(tmp_path, bag, capsy
     rc = main([str(bag), str(tmp_path / 'out2'), '--left-topic', 'left/image_raw',
                '--right-topic', '/left/image_raw', '--no-progress'])
     assert rc == EXIT_REFUSED and 'the same' in _one_error_line(capsys)
+
+
+def _bag_with_camera_info(path, frames, k_focal_px, width, height):
+    """Write the rendered pairs, each after the left camera's CameraInfo (K of the rig)."""
+    cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+    with Writer(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        conns = {topic: writer.add_connection(topic, msgtype, typestore=TS) for topic, msgtype
+                 in ((LEFT, 'sensor_msgs/msg/Image'), (RIGHT, 'sensor_msgs/msg/Image'),
+                     ('/left/camera_info', 'sensor_msgs/msg/CameraInfo'))}
+        for i, frame in enumerate(frames):
+            stamp = left_stamp(i)
+            info = T['sensor_msgs/msg/CameraInfo'](
+                header=_header(stamp, 'left_cam'), height=height, width=width,
+                distortion_model='plumb_bob', d=np.zeros(5),
+                k=np.array([k_focal_px, 0, cx, 0, k_focal_px, cy, 0, 0, 1.0]),
+                r=np.eye(3).ravel(), p=np.zeros(12), binning_x=0, binning_y=0,
+                roi=T['sensor_msgs/msg/RegionOfInterest'](
+                    x_offset=0, y_offset=0, height=0, width=0, do_rectify=False))
+            writer.write(conns['/left/camera_info'], stamp,
+                         TS.serialize_cdr(info, 'sensor_msgs/msg/CameraInfo'))
+            for topic, gray, frame_id in ((LEFT, frame.left, 'left_cam'),
+                                          (RIGHT, frame.right, 'right_cam')):
+                msgtype, msg = image_msg(gray, stamp, frame_id, compressed=False)
+                writer.write(conns[topic], stamp + 1000, TS.serialize_cdr(msg, msgtype))
+    return cx, cy
+
+
+def test_camera_info_topic_narrows_the_prior_as_on_the_node(tmp_path, frames, capsys):
+    height, width = frames[0].left.shape
+    focal = 1.03 * frames[0].setup.focal_px   # a calibration 3 % off, as the node's test
+    cx, cy = _bag_with_camera_info(tmp_path / 'in', frames[:3], focal, width, height)
+    params = tmp_path / 'params.yaml'
+    params.write_text('/**:\n  ros__parameters:\n    camera_info:\n'
+                      '      topic: left/camera_info\n'
+                      '    prior:\n      focal_px: [1500.0, 2500.0]\n')
+    replayed = []
+    config = load_params_file(str(params))
+    summary = run_replay(tmp_path / 'in', tmp_path / 'out', config, on_frame=replayed.append)
+    assert any(note.startswith('prior from camera_info: focal_px') for note in summary.notes)
+    # The node's camera_info handling: the prior narrowed to K before the first pair.
+    narrowed = replace(config, prior=replace(config.prior, focal_px=(0.9 * focal, 1.1 * focal),
+                                             principal_point_px=(cx, cy)))
+    pipeline = PlanePipeline(narrowed)
+    for i, frame in enumerate(replayed):
+        expected = pipeline.process(frames[i].left, frames[i].right, left_stamp(i))
+        assert frame.result.state == expected.state and frame.result.ok == expected.ok
+        assert np.array_equal(frame.result.mask, expected.mask)
+        if expected.ok:
+            assert np.allclose(frame.result.homography, expected.homography, rtol=0,
+                               atol=1e-9)
+    # Without the topic in the bag the prior stays, and the summary says so.
+    write_bag(tmp_path / 'plain', frames[:2])
+    capsys.readouterr()
+    assert main([str(tmp_path / 'plain'), str(tmp_path / 'out2'), '--params-file', str(params),
+                 '--no-progress']) == EXIT_OK
+    assert ("note: camera_info.topic 'left/camera_info' is not in the bag: the prior stays "
+            'as configured') in capsys.readouterr().out
