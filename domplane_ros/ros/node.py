@@ -388,6 +388,14 @@ class PlaneNode(Node):
             implausible_joint_states=(self.implausible_joint_states
                                       if self._joint_sub is not None else None))
         if message.startswith('no images on '):
+            silent = [self.session.activity.topics[side] for side in SIDES
+                      if side in self._qos_warned
+                      and self.session.activity.topics[side] in message]
+            if silent:
+                # The log said it once, at discovery; the status says it while it lasts.
+                wanted = 'reliable' if self.config.transport.reliable else 'best effort'
+                message += (f'; a publisher on {", ".join(silent)} offers QoS incompatible '
+                            f'with this {wanted} subscription: set qos.reliable to match it')
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in self.session.last_cameras)
         slop_s = self.config.sync.slop_s

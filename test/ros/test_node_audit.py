@@ -2,7 +2,8 @@
 
 ``ros2 param set`` of an undeclared name got rclpy's ``Invalid access to undeclared
 parameter(s): []``; ``plane_node --help`` left out ``plane/parallax``; docs/PARAMETERS.md did
-not say which parameters only take effect at start-up.
+not say which parameters only take effect at start-up; and ``/diagnostics`` said only "no
+images" when a camera's publisher offered incompatible QoS (the log said why once).
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from pathlib import Path
 import re
 import time
 
+from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.ros.messages import READ_ONLY
 from domplane_ros.ros.node import PlaneNode
 from domplane_ros.ros.usage import usage
@@ -18,6 +20,8 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
+from rclpy.qos import qos_profile_sensor_data
+from sensor_msgs.msg import Image
 
 DOCS = Path(__file__).resolve().parents[2] / 'docs'
 
@@ -71,3 +75,35 @@ def test_parameters_doc_names_the_start_up_only_parameters():
     match = re.search(r'Only at start-up \([^)]*\): ((?:`[a-z_.]+`(?:, | and )?)+)', text)
     assert match, 'docs/PARAMETERS.md should list the start-up-only parameters'
     assert set(re.findall(r'`([a-z_.]+)`', match.group(1))) == set(READ_ONLY)
+
+
+def test_silent_camera_with_incompatible_publisher_says_so_in_diagnostics(ros_context):
+    node = PlaneNode(context=ros_context, parameter_overrides=[
+        Parameter('qos.reliable', value=True), Parameter('diagnostics.period_s', value=0.2),
+        Parameter('diagnostics.silence_s', value=0.1)])
+    driver = Node('audit_qos_driver', context=ros_context)
+    executor = SingleThreadedExecutor(context=ros_context)
+    executor.add_node(node)
+    executor.add_node(driver)
+    statuses = []
+    try:
+        for side in ('left', 'right'):   # a camera driver that publishes best effort
+            driver.create_publisher(Image, f'{side}/image_raw', qos_profile_sensor_data)
+        driver.create_subscription(DiagnosticArray, '/diagnostics',
+                                   lambda msg: statuses.append(msg.status[0]), 10)
+
+        def said_why():
+            return (len(node._qos_warned) == 2 and statuses
+                    and 'incompatible' in statuses[-1].message)
+
+        deadline = time.monotonic() + 15.0
+        while time.monotonic() < deadline and not said_why():
+            executor.spin_once(timeout_sec=0.05)
+    finally:
+        executor.shutdown()
+        driver.destroy_node()
+        node.destroy_node()
+    message = statuses[-1].message
+    assert message.startswith('no images on /left/image_raw'), message
+    assert ('a publisher on /left/image_raw, /right/image_raw offers QoS incompatible with this '
+            'reliable subscription: set qos.reliable to match it') in message
