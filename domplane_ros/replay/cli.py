@@ -64,7 +64,8 @@ from typing import Any, Callable
 
 from domplane_ros.config import load_params_file, PlaneNodeConfig
 from domplane_ros.errors import BagError, ConfigError
-from domplane_ros.replay.paths import create_output, RunPaths
+from domplane_ros.replay.paths import (create_output, missing_folders, remove_empty_folders,
+                                       RunPaths)
 from domplane_ros.replay.reader import (BagInput, BagReadError, CAMERA_INFO, describe_error,
                                         header_stamp_ns, ReplayedFrame, ReplaySession)
 from domplane_ros.replay.report import CsvOutput, PROG, ReplaySummary
@@ -173,6 +174,9 @@ class _Run:
         self.summary = ReplaySummary(str(paths.input_bag), str(paths.output_bag), storage)
         self.session = ReplaySession(config, topics)
         self.clock = DiagnosticsClock(config.transport.diagnostics_period_s)
+        # Folders the outputs create: removed again (if empty) when nothing is written.
+        self._new_folders = missing_folders(paths.output_bag.parent) + (
+            missing_folders(paths.csv.parent) if paths.csv is not None else [])
         self.output = create_output(paths.output_bag, 'output bag', lambda: BagOutput(
             paths.output_bag, storage, replace=force, debug_images=debug_images,
             parallax=parallax))
@@ -182,6 +186,7 @@ class _Run:
                 self.table = create_output(paths.csv, 'CSV file', lambda: CsvOutput(paths.csv))
             except BaseException:
                 self.output.abort()   # no hidden partial bag left behind
+                remove_empty_folders(self._new_folders)
                 raise
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
@@ -301,6 +306,7 @@ class _Run:
         self.output.abort()
         if self.table is not None:
             self.table.abort()
+        remove_empty_folders(self._new_folders)
 
     def summarise(self, wall_s: float) -> ReplaySummary:
         """Return the summary of the finished run."""

@@ -72,6 +72,25 @@ def create_output(path: Path, what: str, make: Callable[[], Any]) -> Any:
         raise BagError(f'cannot create the {what} {str(path)!r}: {problem}{where}') from err
 
 
+def missing_folders(folder: Path) -> list[Path]:
+    """Return ``folder`` and its ancestors that do not exist yet, deepest first."""
+    missing = []
+    folder = Path(os.path.abspath(folder))
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def remove_empty_folders(folders: list[Path]) -> None:
+    """Remove the folders that are empty, deepest first (never raises)."""
+    for folder in sorted(set(folders), key=lambda path: len(path.parts), reverse=True):
+        try:
+            folder.rmdir()
+        except OSError:
+            pass   # not empty (or gone): it holds something that is not ours to remove
+
+
 def input_bag_folder(input_bag: Path) -> Path:
     """Return the folder an input bag occupies, resolved: nothing may be written inside it.
 

@@ -4,7 +4,8 @@ Found by the session-13 audit (docs/HARDENING.md, "Audit (session 13)"): ``--for
 any folder or file given as OUTPUT_BAG; a ``--csv`` file that could not be created left the
 hidden partial bag folder behind; a topic given as the node names it (``left/image_raw``)
 was not found in a bag that records it as ``/left/image_raw``; and the replay ignored
-``camera_info.topic``, which narrows the node's prior.
+``camera_info.topic``, which narrows the node's prior; a run that wrote nothing ("no pairs")
+left the empty folders it had made for its outputs.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from dataclasses import replace
 from bag_helpers import (_header, image_msg, LEFT, left_stamp, read_bag, RIGHT, T, tree, TS,
                          write_bag)
 from domplane_ros.config import load_params_file
-from domplane_ros.replay.cli import EXIT_OK, EXIT_REFUSED, main, run_replay
+from domplane_ros.replay.cli import EXIT_NO_PAIRS, EXIT_OK, EXIT_REFUSED, main, run_replay
 from domplane_ros.stream.pipeline import PlanePipeline
 import numpy as np
 import pytest
@@ -157,3 +158,12 @@ def test_camera_info_topic_narrows_the_prior_as_on_the_node(tmp_path, frames, ca
                  '--no-progress']) == EXIT_OK
     assert ("note: camera_info.topic 'left/camera_info' is not in the bag: the prior stays "
             'as configured') in capsys.readouterr().out
+
+
+def test_a_run_that_writes_nothing_leaves_no_folders_it_made(tmp_path, capsys):
+    write_bag(tmp_path / 'empty', [], 'mcap')
+    before = tree(tmp_path)
+    rc = main([str(tmp_path / 'empty'), str(tmp_path / 'new' / 'a' / 'out'),
+               '--csv', str(tmp_path / 'new2' / 'b' / 'pairs.csv'), '--no-progress'])
+    assert rc == EXIT_NO_PAIRS and 'nothing was written' in capsys.readouterr().err
+    assert tree(tmp_path) == before
