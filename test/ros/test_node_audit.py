@@ -13,6 +13,7 @@ import re
 import time
 
 from diagnostic_msgs.msg import DiagnosticArray
+from domplane_ros.replay.reader import ReplaySession
 from domplane_ros.ros.messages import READ_ONLY
 from domplane_ros.ros.node import PlaneNode
 from domplane_ros.ros.usage import usage
@@ -21,7 +22,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 from rclpy.qos import qos_profile_sensor_data
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CameraInfo, Image
 
 DOCS = Path(__file__).resolve().parents[2] / 'docs'
 
@@ -107,3 +108,25 @@ def test_silent_camera_with_incompatible_publisher_says_so_in_diagnostics(ros_co
     assert message.startswith('no images on /left/image_raw'), message
     assert ('a publisher on /left/image_raw, /right/image_raw offers QoS incompatible with this '
             'reliable subscription: set qos.reliable to match it') in message
+
+
+def test_replay_applies_camera_info_as_the_node_does(ros_context):
+    overrides = [Parameter('camera_info.topic', value='left/camera_info'),
+                 Parameter('camera_info.focal_tolerance', value=0.2),
+                 Parameter('prior.focal_px', value=[1500.0, 2500.0])]
+    node = PlaneNode(context=ros_context, parameter_overrides=overrides)
+    try:
+        session = ReplaySession(node.config)
+        uncalibrated, calibrated = CameraInfo(), CameraInfo()
+        uncalibrated.width = calibrated.width = 640
+        uncalibrated.height = calibrated.height = 480
+        calibrated.k = [702.0, 0.0, 330.0, 0.0, 698.0, 250.0, 0.0, 0.0, 1.0]
+        for msg in (uncalibrated, calibrated, calibrated):
+            node._on_camera_info(msg)
+            note = session.apply_camera_info(msg)
+            assert session.config.prior == node.config.prior, note
+        assert node.config.prior.focal_px == (560.0, 840.0)
+        assert node.config.prior.principal_point_px == (330.0, 250.0)
+        assert session.pipeline.config == node.pipeline.config
+    finally:
+        node.destroy_node()
