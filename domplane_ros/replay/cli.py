@@ -8,6 +8,7 @@ with the pure-Python ``rosbags`` library, pairs them with the node's
 same resets), and writes a new bag with the node's outputs::
 
     plane_replay INPUT_BAG OUTPUT_BAG [--params-file config/plane_node.yaml]
+                 [--node-name plane_node]
                  [--left-topic /left/image_raw] [--right-topic /right/image_raw]
                  [--storage sqlite3|mcap] [--force] [--csv FILE] [--no-progress]
                  [--strict] [--keep-partial] [--debug-images] [--parallax]
@@ -64,6 +65,7 @@ from typing import Any, Callable
 
 from domplane_ros.config import load_params_file, PlaneNodeConfig
 from domplane_ros.errors import BagError, ConfigError
+from domplane_ros.params_file import node_name_hint
 from domplane_ros.replay.paths import (create_output, missing_folders, remove_empty_folders,
                                        RunPaths)
 from domplane_ros.replay.reader import (BagInput, BagReadError, CAMERA_INFO, describe_error,
@@ -373,6 +375,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--params-file', metavar='YAML',
                         help='ROS 2 parameters file with a "plane_node: ros__parameters:" '
                              "block (default: the node's defaults)")
+    parser.add_argument('--node-name', default='plane_node', metavar='NAME',
+                        help='read the blocks of --params-file for this node name, as '
+                             "'-r __node:=NAME' renames the node (default: %(default)s)")
     parser.add_argument('--left-topic', default='/left/image_raw',
                         help='left image topic (default: %(default)s)')
     parser.add_argument('--right-topic', default='/right/image_raw',
@@ -429,11 +434,11 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, or a usage error already printed by argparse
         return int(exc.code) if isinstance(exc.code, int) else EXIT_REFUSED
     try:
-        config = (load_params_file(args.params_file) if args.params_file
+        config = (load_params_file(args.params_file, args.node_name) if args.params_file
                   else PlaneNodeConfig())
     except ConfigError as err:
-        _error(str(err) if args.params_file in str(err)
-               else f'params file {args.params_file!r}: {err}')
+        _error((str(err) if args.params_file in str(err)
+                else f'params file {args.params_file!r}: {err}') + node_name_hint(err))
         return EXIT_REFUSED
     progress = args.progress if args.progress is not None else sys.stderr.isatty()
     installed, previous = _terminate_like_ctrl_c()

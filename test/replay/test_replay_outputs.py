@@ -167,3 +167,20 @@ def test_a_run_that_writes_nothing_leaves_no_folders_it_made(tmp_path, capsys):
                '--csv', str(tmp_path / 'new2' / 'b' / 'pairs.csv'), '--no-progress'])
     assert rc == EXIT_NO_PAIRS and 'nothing was written' in capsys.readouterr().err
     assert tree(tmp_path) == before
+
+
+def test_node_name_reads_the_blocks_of_a_renamed_node(tmp_path, bag, capsys):
+    params = tmp_path / 'front.yaml'   # a file for '-r __node:=front_plane -r __ns:=/front'
+    params.write_text('/front/front_plane:\n  ros__parameters:\n    camera_info:\n'
+                      '      topic: front/camera_info\n')
+    capsys.readouterr()
+    rc = main([str(bag), str(tmp_path / 'out'), '--params-file', str(params), '--no-progress'])
+    line = _one_error_line(capsys)
+    assert rc == EXIT_REFUSED and 'blocks found: front/front_plane' in line
+    assert '--node-name' in line
+    rc = main([str(bag), str(tmp_path / 'out'), '--params-file', str(params),
+               '--node-name', 'front_plane', '--no-progress'])
+    # The block was read: its camera_info.topic is looked for in the bag.
+    assert rc == EXIT_OK
+    assert "note: camera_info.topic 'front/camera_info' is not in the bag" in (
+        capsys.readouterr().out)
