@@ -40,7 +40,7 @@ from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterException)
+                              ParameterException, ParameterNotDeclaredException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -50,6 +50,14 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from std_msgs.msg import Float64MultiArray
 
 _THROTTLE_S = 5.0
+
+
+class UnknownParameterError(ParameterNotDeclaredException):
+    """A parameter that is not declared was set; the message names the nearest declared one."""
+
+    def __init__(self, name: str) -> None:
+        """Make the error of the undeclared parameter ``name``."""
+        Exception.__init__(self, unknown_parameter_message(name))
 
 
 def _stamp_ns(msg: Any) -> int:
@@ -172,6 +180,15 @@ class PlaneNode(Node):
             values[spec.name] = check_value(spec, _plain(value))
         self._check_unknown_overrides()
         return values
+
+    def _check_undeclared_parameters(self, parameter_list: list[Parameter]) -> None:
+        # rclpy's own check, run before any set-parameters callback, refuses an undeclared
+        # name with 'Invalid access to undeclared parameter(s): []' (its generator is spent
+        # by then). ros2 param set gets this reason instead: the name and the nearest one.
+        for param in parameter_list:
+            if isinstance(param, Parameter) and not self.has_parameter(param.name):
+                raise UnknownParameterError(param.name)
+        super()._check_undeclared_parameters(parameter_list)
 
     def _check_unknown_overrides(self) -> None:
         overrides = getattr(self, '_parameter_overrides', {}) or {}
@@ -371,6 +388,14 @@ class PlaneNode(Node):
             implausible_joint_states=(self.implausible_joint_states
                                       if self._joint_sub is not None else None))
         if message.startswith('no images on '):
+            silent = [self.session.activity.topics[side] for side in SIDES
+                      if side in self._qos_warned
+                      and self.session.activity.topics[side] in message]
+            if silent:
+                # The log said it once, at discovery; the status says it while it lasts.
+                wanted = 'reliable' if self.config.transport.reliable else 'best effort'
+                message += (f'; a publisher on {", ".join(silent)} offers QoS incompatible '
+                            f'with this {wanted} subscription: set qos.reliable to match it')
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in self.session.last_cameras)
         slop_s = self.config.sync.slop_s
