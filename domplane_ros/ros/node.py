@@ -96,6 +96,7 @@ class PlaneNode(Node):
         self._subs = self._make_subscriptions(config)
         topics = tuple(sub.topic_name for sub in self._subs)
         self.session = StreamSession(config, topics, start=time.monotonic())
+        self.add_pre_set_parameters_callback(self._refuse_unknown)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._diag_timer = self.create_timer(config.transport.diagnostics_period_s,
                                              self.publish_diagnostics)
@@ -181,14 +182,14 @@ class PlaneNode(Node):
         self._check_unknown_overrides()
         return values
 
-    def _check_undeclared_parameters(self, parameter_list: list[Parameter]) -> None:
-        # rclpy's own check, run before any set-parameters callback, refuses an undeclared
-        # name with 'Invalid access to undeclared parameter(s): []' (its generator is spent
-        # by then). ros2 param set gets this reason instead: the name and the nearest one.
+    def _refuse_unknown(self, parameter_list: list[Parameter]) -> list[Parameter]:
+        # A pre-set callback runs before rclpy's own undeclared check, which refuses an
+        # undeclared name with 'Invalid access to undeclared parameter(s): []' (its generator
+        # is spent by then): ros2 param set gets the name and the nearest declared one instead.
         for param in parameter_list:
-            if isinstance(param, Parameter) and not self.has_parameter(param.name):
+            if not self.has_parameter(param.name):
                 raise UnknownParameterError(param.name)
-        super()._check_undeclared_parameters(parameter_list)
+        return list(parameter_list)
 
     def _check_unknown_overrides(self) -> None:
         overrides = getattr(self, '_parameter_overrides', {}) or {}
