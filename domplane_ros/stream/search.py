@@ -30,7 +30,8 @@ from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.swap import swap_rivals
-from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.trust import (MAX_BELOW_FRACTION, MIN_BOTTOM_SCORE, MIN_BOTTOM_SHARE,
+                                       MIN_GROUND_SLOPE, TrustGate)
 from domplane_ros.stream.verdict import Verdict
 import numpy as np
 
@@ -70,8 +71,12 @@ DOUBT_SLOPE = 0.05
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
 # little of the image, with at least NEAR_MISS_RATIO x verification.min_score. Measured: docs/
 # BENCHMARKS.md, trust round 8.
-NEAR_MISS_RATIO = 0.8
+NEAR_MISS_RATIO = 0.6
 NEAR_MISSES = 2
+# ... and, with NEAR_MISS_BOTTOM, the verified planes of a ground slope refused only for
+# explaining too little of the image's bottom (``not the ground``): a fit of the far floor
+# whose error grows toward the near rows (faint 1.28 m tiles, seeds 215 and 122 with ``both``).
+NEAR_MISS_BOTTOM = True
 
 __all__ = ['PlaneSearch', 'propagate']
 
@@ -288,9 +293,10 @@ class PlaneSearch:
         # miss whatever its verification says: the refinement moves it a pixel or two, not to
         # a slope of the other sign, and would take a ground plane's slot.
         misses = sorted(((v, plane) for v, plane in judged
-                         if v.ground and not v.swapped
-                         and v.verification.reason == REASON_LOW_SUPPORT
-                         and v.verification.score >= least),
+                         if (v.ground and not v.swapped
+                             and v.verification.reason == REASON_LOW_SUPPORT
+                             and v.verification.score >= least)
+                         or (NEAR_MISS_BOTTOM and _misses_the_bottom(v, plane, size))),
                         key=lambda item: -item[0].verification.score)
         work, added, tried = self._work(), False, []
         for verdict, plane in misses:
@@ -428,3 +434,16 @@ class PlaneSearch:
         else:
             step.reason = 'prior search found no plane'
         self._search = None
+
+
+def _misses_the_bottom(verdict: Verdict, plane: PlaneEstimate, size: tuple[int, int]) -> bool:
+    """Return whether a plane was refused only for explaining too little of the image bottom.
+
+    Verified over the image, of a ground plane's disparity slope, nothing beyond it, but under
+    the gate's least bottom score (:meth:`~domplane_ros.stream.trust.TrustGate.judge`).
+    """
+    check = verdict.verification
+    return (check.accepted and not verdict.ground and not verdict.swapped
+            and check.below_fraction <= MAX_BELOW_FRACTION
+            and check.bottom_score < max(MIN_BOTTOM_SCORE, MIN_BOTTOM_SHARE * check.score)
+            and swap_evidence(plane.homography, *size).disparity_slope >= MIN_GROUND_SLOPE)
