@@ -19,7 +19,13 @@ pair interleaved, so a noisy machine slows both alike; ratios are ORB / ours. Ro
 * ``lines (both)``: the warm 640x480 pair with ``features.kind: both`` beside ``points``
   (the ratio is both / points);
 * end-to-end latency through DDS on loopback (image header stamp to the mask's arrival) with a
-  publisher at 30 Hz into a live ``plane_node`` in this process, at 640x480 and 3840x2160.
+  publisher at 30 Hz into a live ``plane_node`` in this process, at 640x480 and 3840x2160;
+  with ``--dds-process``, ``plane_node`` runs as a user starts it, in its own process on one
+  core (``taskset -c 0``), the publisher here on the other (with the documented Fast DDS
+  profile for large images, ``--fastdds-profile``), mono8 or rgb8 (``--encodings``).
+
+``--breakdown`` prints instead where a warm pair's CPU time goes on the node's path, from the
+serialised image messages to the serialised mask message, stage by stage.
 
 Every pipeline and the node use the documented default configuration and prior (nothing is
 set from a rendered scene's truth). A PNG bar chart of the medians (p95 as whiskers) is written
@@ -34,7 +40,6 @@ import functools
 import os
 from pathlib import Path
 import random
-import signal
 import subprocess
 import sys
 import time
@@ -50,7 +55,7 @@ from domplane_ros.sim.truth import every_floor_pixel
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.session import LATENCY_WINDOW
 from domplane_ros.tools.common import (add_output_argument, machine_name, mono8_message,
-                                       one_core, ONE_THREAD_ENV, tool_parser)
+                                       one_core, ONE_THREAD_ENV, stop_process, tool_parser)
 import numpy as np
 
 _RENDER_LIMIT = (1280, 720)  # larger sizes are upscaled renders (the renderer is slow)
@@ -418,15 +423,11 @@ def _image_messages(width: int, height: int, encoding: str, n_frames: int = 10,
     return pairs
 
 
-def _stop_process(proc: subprocess.Popen) -> None:
-    """Stop a child process: Ctrl-C, then kill after 10 s."""
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+def _cpu_seconds(pid: int) -> float:
+    """Return the CPU seconds (user + system) a process has used so far (Linux)."""
+    with open(f'/proc/{pid}/stat', encoding='ascii') as stream:
+        fields = stream.read().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
 def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
@@ -454,6 +455,7 @@ def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
     for name in ('FASTDDS_DEFAULT_PROFILES_FILE', 'FASTRTPS_DEFAULT_PROFILES_FILE'):
         dds[name] = str(Path(profile).resolve()) if profile else ''
     os.environ.update(dds)
+    node_share = float('nan')
     node_proc = subprocess.Popen(
         ['taskset', '-c', str(cores[0]), sys.executable, '-m', 'domplane_ros.ros.node',
          '--ros-args', '-p', 'diagnostics.period_s:=1.0', '--log-level', 'warn'],
@@ -501,17 +503,19 @@ def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
         run.latencies_ms.clear()
         run.taken_late_ms.clear()
         run.sent_at.clear()
+        cpu_before = _cpu_seconds(node_proc.pid)
         start = time.monotonic()
         while time.monotonic() - start < seconds:
             publish(pairs[len(run.sent_at) % len(pairs)])
             spin_until(start + len(run.sent_at) / rate_hz)
+        node_share = (_cpu_seconds(node_proc.pid) - cpu_before) / (time.monotonic() - start)
         spin_until(time.monotonic() + 2.5)
     finally:
         executor.shutdown()
         driver.destroy_node()
         rclpy.try_shutdown()
         os.sched_setaffinity(0, affinity)
-        _stop_process(node_proc)
+        stop_process(node_proc)
     sent = len(run.sent_at)
     rate = (sent - 1) / max(run.sent_at[-1] - run.sent_at[0], 1e-9) if sent > 1 else 0.0
     lat = np.asarray(run.latencies_ms or [float('nan')])
@@ -529,7 +533,7 @@ def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
           f'{np.percentile(lat, 95):.1f} ms, max {np.max(lat):.1f} ms (taken here a median '
           f'{np.median(run.taken_late_ms or [float("nan")]):.1f} ms later); in the node '
           f'(decode to publish, its last {LATENCY_WINDOW} pairs) median {median} ms, p95 '
-          f'{p95} ms')
+          f'{p95} ms; the node used {100 * node_share:.0f} % of a core')
 
 
 # --- Where a pair's time goes (--breakdown) -----------------------------------------------
