@@ -423,11 +423,34 @@ def _image_messages(width: int, height: int, encoding: str, n_frames: int = 10,
     return pairs
 
 
-def _cpu_seconds(pid: int) -> float:
-    """Return the CPU seconds (user + system) a process has used so far (Linux)."""
-    with open(f'/proc/{pid}/stat', encoding='ascii') as stream:
+def _cpu_seconds(pid: int, tid: int | None = None) -> float:
+    """Return the CPU seconds (user + system) a process (or its thread) has used (Linux)."""
+    path = f'/proc/{pid}/stat' if tid is None else f'/proc/{pid}/task/{tid}/stat'
+    with open(path, encoding='ascii', errors='replace') as stream:
         fields = stream.read().rsplit(')', 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def _thread_cpu(pid: int) -> dict[tuple[int, str], float]:
+    """Return the CPU seconds of each thread of a process, keyed by (id, name) (Linux)."""
+    out = {}
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        try:
+            with open(f'/proc/{pid}/task/{tid}/comm', encoding='ascii',
+                      errors='replace') as stream:
+                name = stream.read().strip()
+            out[(int(tid), name)] = _cpu_seconds(pid, int(tid))
+        except OSError:
+            continue  # the thread ended
+    return out
+
+
+def _thread_shares(before: dict[tuple[int, str], float], after: dict[tuple[int, str], float],
+                   seconds: float) -> str:
+    """Return the busiest threads' shares of a core between two :func:`_thread_cpu` calls."""
+    used = sorted(((after[key] - before.get(key, 0.0)) / seconds, key) for key in after)
+    return ', '.join(f'{name} ({tid}) {100 * share:.0f} %'
+                     for share, (tid, name) in reversed(used[-4:]) if share >= 0.01)
 
 
 def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
@@ -455,7 +478,7 @@ def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
     for name in ('FASTDDS_DEFAULT_PROFILES_FILE', 'FASTRTPS_DEFAULT_PROFILES_FILE'):
         dds[name] = str(Path(profile).resolve()) if profile else ''
     os.environ.update(dds)
-    node_share = float('nan')
+    node_share, threads = float('nan'), ''
     node_proc = subprocess.Popen(
         ['taskset', '-c', str(cores[0]), sys.executable, '-m', 'domplane_ros.ros.node',
          '--ros-args', '-p', 'diagnostics.period_s:=1.0', '--log-level', 'warn'],
@@ -503,12 +526,14 @@ def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
         run.latencies_ms.clear()
         run.taken_late_ms.clear()
         run.sent_at.clear()
-        cpu_before = _cpu_seconds(node_proc.pid)
+        cpu_before, threads_before = _cpu_seconds(node_proc.pid), _thread_cpu(node_proc.pid)
         start = time.monotonic()
         while time.monotonic() - start < seconds:
             publish(pairs[len(run.sent_at) % len(pairs)])
             spin_until(start + len(run.sent_at) / rate_hz)
         node_share = (_cpu_seconds(node_proc.pid) - cpu_before) / (time.monotonic() - start)
+        threads = _thread_shares(threads_before, _thread_cpu(node_proc.pid),
+                                 time.monotonic() - start)
         spin_until(time.monotonic() + 2.5)
     finally:
         executor.shutdown()
@@ -533,7 +558,7 @@ def bench_dds_process(seconds: float, rate_hz: float, width: int, height: int,
           f'{np.percentile(lat, 95):.1f} ms, max {np.max(lat):.1f} ms (taken here a median '
           f'{np.median(run.taken_late_ms or [float("nan")]):.1f} ms later); in the node '
           f'(decode to publish, its last {LATENCY_WINDOW} pairs) median {median} ms, p95 '
-          f'{p95} ms; the node used {100 * node_share:.0f} % of a core')
+          f'{p95} ms; the node used {100 * node_share:.0f} % of a core (threads: {threads})')
 
 
 # --- Where a pair's time goes (--breakdown) -----------------------------------------------
