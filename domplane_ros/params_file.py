@@ -45,6 +45,20 @@ _WILDCARDS = ('**', '*')
 _ROS_PARAMETERS = {'use_sim_time': bool}
 
 
+class NoNodeBlockError(ConfigError):
+    """The parameters file has no block that applies to the node."""
+
+
+def node_name_hint(err: BaseException) -> str:
+    """Return what plane_replay and plane_pair add to a file without the node's block.
+
+    Their ``--node-name`` reads the blocks of a renamed node (``-r __node:=front_plane``).
+    """
+    if isinstance(err, NoNodeBlockError):
+        return "; for a renamed node's block give --node-name NAME"
+    return ''
+
+
 def read_yaml(path: str | os.PathLike[str]) -> Any:
     """Read a YAML file within the limits of this module and return its document.
 
@@ -221,8 +235,9 @@ def read_node_params(path: str | os.PathLike[str], node_name: str = 'plane_node'
     mine = [(block, params) for block, params in blocks if applies_to(block, node_name)]
     if not mine:
         found = ', '.join(_short(block) for block, _ in blocks[:3]) or 'none'
-        raise ConfigError(f'params file {name} has no block for {node_name} (a "{node_name}:" '
-                          f'or "/**:" key holding "ros__parameters:"; blocks found: {found})')
+        raise NoNodeBlockError(
+            f'params file {name} has no block for {node_name} (a "{node_name}:" or "/**:" key '
+            f'holding "ros__parameters:"; blocks found: {found})')
     mine.sort(key=lambda item: not applies_wildcard(item[0]))   # stable: file order kept
     merged: dict[str, Any] = {}
     for block, params in mine:

@@ -39,6 +39,7 @@ from domplane_ros.config import (check_value, ConfigError, load_params_file, one
                                  PARAMETERS_BY_NAME, PlaneNodeConfig)
 from domplane_ros.core.legend import with_legend
 from domplane_ros.pair.files import image_pairs, ImagePair, PairInputError, read_pair
+from domplane_ros.params_file import node_name_hint
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.pipeline import PlanePipeline
 import numpy as np
@@ -80,12 +81,14 @@ class PairOutcome:
 
 
 def configure(params_file: str | None = None,
-              overrides: dict[str, Sequence[float]] | None = None) -> PlaneNodeConfig:
+              overrides: dict[str, Sequence[float]] | None = None,
+              node_name: str = 'plane_node') -> PlaneNodeConfig:
     """Return the configuration of a run: a params file's (or the defaults), then overrides.
 
     Args:
         params_file: ROS 2 parameters YAML file (``/**:``, ``plane_node:``), or None.
         overrides: Parameter name (``prior.focal_px``, ``features.roi``, ...) to value.
+        node_name: The node whose blocks of the file are read (a renamed node's name).
 
     Returns:
         The validated configuration, with the whole prior search in one pair.
@@ -94,7 +97,8 @@ def configure(params_file: str | None = None,
         ConfigError: If the file or a value is invalid (the message names the parameter).
 
     """
-    config = load_params_file(params_file) if params_file else PlaneNodeConfig()
+    config = (load_params_file(params_file, node_name) if params_file
+              else PlaneNodeConfig())
     for name, value in (overrides or {}).items():
         checked = check_value(PARAMETERS_BY_NAME[name], list(value))
         section, field = name.split('.')
@@ -216,6 +220,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--params-file', metavar='YAML',
                         help='ROS 2 parameters file with a "/**:" or "plane_node:" '
                              "ros__parameters block (default: the node's defaults)")
+    parser.add_argument('--node-name', default='plane_node', metavar='NAME',
+                        help='read the blocks of --params-file for this node name, as '
+                             "'-r __node:=NAME' renames the node (default: %(default)s)")
     for option, metavar, what in (
             ('focal_px', ('MIN', 'MAX'), 'focal length range in pixels, '
                                          'f = (W/2)/tan(HFOV/2)'),
@@ -254,7 +261,7 @@ def _prepare(args: argparse.Namespace) -> tuple[list[ImagePair], PlaneNodeConfig
         raise ConfigError(f'--fps must be a positive number, got {args.fps}')
     overrides = {RANGE_OPTIONS[k]: getattr(args, k) for k in RANGE_OPTIONS
                  if getattr(args, k) is not None}
-    config = configure(args.params_file, overrides)
+    config = configure(args.params_file, overrides, args.node_name)
     pairs = image_pairs(args.left, args.right)
     read_pair(pairs[0])   # a first pair that cannot be read refuses the run
     out = Path(args.out) if args.out else None
@@ -290,7 +297,7 @@ def main(argv: list[str] | None = None) -> int:
     except ConfigError as err:
         where = f'params file {args.params_file!r}: ' if (
             args.params_file and args.params_file not in str(err)) else ''
-        _error(where + str(err))
+        _error(where + str(err) + node_name_hint(err))
         return EXIT_REFUSED
     except (PairInputError, OSError) as err:
         _error(str(err))

@@ -8,6 +8,7 @@ with the pure-Python ``rosbags`` library, pairs them with the node's
 same resets), and writes a new bag with the node's outputs::
 
     plane_replay INPUT_BAG OUTPUT_BAG [--params-file config/plane_node.yaml]
+                 [--node-name plane_node]
                  [--left-topic /left/image_raw] [--right-topic /right/image_raw]
                  [--storage sqlite3|mcap] [--force] [--csv FILE] [--no-progress]
                  [--strict] [--keep-partial] [--debug-images] [--parallax]
@@ -36,8 +37,9 @@ not give (undecodable payloads: skipped, counted, named on stderr and recorded i
 the end but gave no pair to process (no messages on a topic, none paired, none decoded): the
 summary says "no pairs" and why, and nothing is written; 2 when the run is refused
 before anything is written (missing, unreadable or truncated bag, a folder without
-metadata.yaml, unknown topic, existing output without ``--force``, an output inside the input
-bag's folder, invalid params file); 1 when reading or writing fails part-way (a damaged bag,
+metadata.yaml, unknown topic, existing output without ``--force`` or, with it, one that is not
+a bag, an output inside the input bag's folder or in one that cannot be written, invalid params
+file); 1 when reading or writing fails part-way (a damaged bag,
 a full disk): the partial output is removed, or on a read failure with ``--keep-partial``
 kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its metadata); 130 on
 Ctrl-C and 143 on SIGTERM, the partial output removed. Every error is one line on stderr.
@@ -46,17 +48,16 @@ The output is written into a hidden temporary folder next to ``OUTPUT_BAG`` and 
 place only when it is complete, so an interrupted run never leaves a bag that looks complete.
 
 The package imports ``rosbags`` but not ``rclpy``: :mod:`~domplane_ros.replay.reader` reads
-and pairs, :mod:`~domplane_ros.replay.writer` writes the bag, :mod:`~domplane_ros.replay.report`
-the CSV file and the summary; the session, pipeline, pairing and decoding are the ones the live
+and pairs, :mod:`~domplane_ros.replay.paths` checks where the run writes,
+:mod:`~domplane_ros.replay.writer` writes the bag, :mod:`~domplane_ros.replay.report` the CSV
+file and the summary; the session, pipeline, pairing and decoding are the ones the live
 node uses. This module parses the command line and runs the replay.
 """
 
 from __future__ import annotations
 
 import argparse
-from dataclasses import dataclass
 import os
-from pathlib import Path
 import signal
 import sys
 import time
@@ -64,8 +65,11 @@ from typing import Any, Callable
 
 from domplane_ros.config import load_params_file, PlaneNodeConfig
 from domplane_ros.errors import BagError, ConfigError
-from domplane_ros.replay.reader import (BagInput, BagReadError, describe_error, header_stamp_ns,
-                                        ReplayedFrame, ReplaySession)
+from domplane_ros.params_file import node_name_hint
+from domplane_ros.replay.paths import (create_output, missing_folders, remove_empty_folders,
+                                       RunPaths)
+from domplane_ros.replay.reader import (BagInput, BagReadError, CAMERA_INFO, describe_error,
+                                        header_stamp_ns, ReplayedFrame, ReplaySession)
 from domplane_ros.replay.report import CsvOutput, PROG, ReplaySummary
 from domplane_ros.replay.writer import (BagOutput, BagWriteError, DiagnosticsClock,
                                         keep_partial, set_run_metadata, STORAGES)
@@ -144,11 +148,13 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     """
     if storage is not None and storage not in STORAGES:
         raise ValueError(f'storage must be one of {", ".join(STORAGES)}, got {storage!r}')
-    paths = _RunPaths.check(input_bag, output_bag, csv_path, force, keep_partial)
+    paths = RunPaths.check(input_bag, output_bag, csv_path, force, keep_partial)
     t_start = time.perf_counter()
-    with BagInput(paths.input_bag, left_topic, right_topic) as bag:
-        run = _Run(bag, paths, config if config is not None else PlaneNodeConfig(),
-                   (left_topic, right_topic), storage or bag.storage, force, progress,
+    config = config if config is not None else PlaneNodeConfig()
+    with BagInput(paths.input_bag, left_topic, right_topic,
+                  config.transport.camera_info_topic) as bag:
+        run = _Run(bag, paths, config, bag.sides_topics(), storage or bag.storage, force,
+                   progress,
                    debug_images, parallax)
         try:
             run.execute(on_frame, strict, keep_partial)
@@ -159,42 +165,10 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     return run.summarise(time.perf_counter() - t_start)
 
 
-@dataclass(frozen=True)
-class _RunPaths:
-    """Where a run reads and writes, checked before anything is written."""
-
-    input_bag: Path
-    output_bag: Path
-    csv: Path | None
-    incomplete: Path          # where --keep-partial puts a partial bag
-    csv_incomplete: Path | None
-
-    @classmethod
-    def check(cls, input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[str],
-              csv_path: str | os.PathLike[str] | None, force: bool,
-              keep_partial: bool) -> _RunPaths:
-        """Return the paths, or raise BagError if the run must be refused."""
-        input_path, output_path = Path(input_bag), Path(output_bag)
-        csv_file = Path(csv_path) if csv_path is not None else None
-        if not input_path.exists():
-            raise BagError(f'input bag {str(input_path)!r} does not exist')
-        _check_paths(input_path, output_path, csv_file, force)
-        paths = cls(input_path, output_path, csv_file,
-                    output_path.with_name(output_path.name + '.incomplete'),
-                    (csv_file.with_name(csv_file.name + '.incomplete')
-                     if csv_file is not None else None))
-        if keep_partial and not force:
-            for path in (paths.incomplete, paths.csv_incomplete):
-                if path is not None and (path.exists() or path.is_symlink()):
-                    raise BagError(f'{str(path)!r} exists (where --keep-partial would put a '
-                                   'partial output); use --force to replace it')
-        return paths
-
-
 class _Run:
     """One replay's open outputs and its session, from the first message to the summary."""
 
-    def __init__(self, bag: BagInput, paths: _RunPaths, config: PlaneNodeConfig,
+    def __init__(self, bag: BagInput, paths: RunPaths, config: PlaneNodeConfig,
                  topics: tuple[str, str], storage: str, force: bool, progress: bool,
                  debug_images: bool = False, parallax: bool = False) -> None:
         self.bag = bag
@@ -202,12 +176,28 @@ class _Run:
         self.summary = ReplaySummary(str(paths.input_bag), str(paths.output_bag), storage)
         self.session = ReplaySession(config, topics)
         self.clock = DiagnosticsClock(config.transport.diagnostics_period_s)
-        self.output = BagOutput(paths.output_bag, storage, replace=force,
-                                debug_images=debug_images, parallax=parallax)
-        self.table = CsvOutput(paths.csv) if paths.csv is not None else None
+        # Folders the outputs create: removed again (if empty) when nothing is written.
+        self._new_folders = missing_folders(paths.output_bag.parent) + (
+            missing_folders(paths.csv.parent) if paths.csv is not None else [])
+        self.output = create_output(paths.output_bag, 'output bag', lambda: BagOutput(
+            paths.output_bag, storage, replace=force, debug_images=debug_images,
+            parallax=parallax))
+        self.table = None
+        if paths.csv is not None:
+            try:
+                self.table = create_output(paths.csv, 'CSV file', lambda: CsvOutput(paths.csv))
+            except BaseException:
+                self.output.abort()   # no hidden partial bag left behind
+                remove_empty_folders(self._new_folders)
+                raise
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
         self._noted = 0     # undecodable messages given to the session so far
+        self.summary.notes = list(bag.notes)
+        if config.head.joint_states_topic:
+            self.summary.notes.append(
+                f'head.joint_states_topic {config.head.joint_states_topic!r} is not replayed: '
+                "the joints' hint to expect a big change is the live node's only")
 
     def execute(self, on_frame: Callable[[ReplayedFrame], None] | None, strict: bool,
                 keep: bool) -> None:
@@ -215,6 +205,9 @@ class _Run:
         try:
             for item in self.bag.messages():
                 self._take_undecodable(strict)
+                if item.side == CAMERA_INFO:
+                    self._note(self.session.apply_camera_info(item.msg))
+                    continue
                 self._write_diagnostics(self.clock.tick(header_stamp_ns(item.msg)))
                 self._count_message(item.side)
                 for frame in self.session.add(item.side, item.msg):
@@ -235,6 +228,11 @@ class _Run:
             self.bar.close()
             self._abort()
             raise
+
+    def _note(self, note: str) -> None:
+        """Keep a note for the summary (each text once, at most 5)."""
+        if note and note not in self.summary.notes and len(self.summary.notes) < 5:
+            self.summary.notes.append(note)
 
     def _check_pairs(self) -> None:
         """Refuse to commit an output that holds no processed pair (NoPairsError)."""
@@ -310,6 +308,7 @@ class _Run:
         self.output.abort()
         if self.table is not None:
             self.table.abort()
+        remove_empty_folders(self._new_folders)
 
     def summarise(self, wall_s: float) -> ReplaySummary:
         """Return the summary of the finished run."""
@@ -333,42 +332,6 @@ class _Run:
             summary.first_errors = (self.bag.undecodable[:3] + (
                 [session.last_error] if counters.decode_errors else []))
         return summary
-
-
-def input_bag_folder(input_bag: Path) -> Path:
-    """Return the folder an input bag occupies, resolved: nothing may be written inside it.
-
-    A bag folder is itself; a storage file inside a bag folder (its folder holds
-    ``metadata.yaml``, or the file is named after its folder as rosbag2 names them,
-    ``NAME/NAME_0.db3``) is that folder; a storage file on its own is the file.
-    """
-    resolved = input_bag.resolve()
-    if resolved.is_dir():
-        return resolved
-    folder = resolved.parent
-    if (folder / 'metadata.yaml').exists() or resolved.name.startswith(folder.name + '_'):
-        return folder
-    return resolved
-
-
-def _check_paths(input_bag: Path, output_bag: Path, csv_path: Path | None,
-                 force: bool) -> None:
-    in_res = input_bag_folder(input_bag)
-    out_res = output_bag.resolve()
-    if (out_res == in_res or in_res.is_relative_to(out_res) or out_res.is_relative_to(in_res)
-            or input_bag.resolve().is_relative_to(out_res)):
-        raise BagError(f'output {str(output_bag)!r} would overwrite or nest in the input bag '
-                       f'{str(input_bag)!r} (its folder {str(in_res)!r})')
-    if (output_bag.exists() or output_bag.is_symlink()) and not force:
-        raise BagError(f'output {str(output_bag)!r} exists; use --force to replace it')
-    if csv_path is not None:
-        if (csv_path.resolve().is_relative_to(in_res) or csv_path.resolve() == out_res
-                or csv_path.resolve().is_relative_to(out_res)):
-            raise BagError(f'CSV file {str(csv_path)!r} would overwrite a bag')
-        if csv_path.exists() and not force:
-            raise BagError(f'CSV file {str(csv_path)!r} exists; use --force to replace it')
-        if csv_path.is_dir():
-            raise BagError(f'CSV file {str(csv_path)!r} is a directory')
 
 
 class _NoBar:
@@ -412,6 +375,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--params-file', metavar='YAML',
                         help='ROS 2 parameters file with a "plane_node: ros__parameters:" '
                              "block (default: the node's defaults)")
+    parser.add_argument('--node-name', default='plane_node', metavar='NAME',
+                        help='read the blocks of --params-file for this node name, as '
+                             "'-r __node:=NAME' renames the node (default: %(default)s)")
     parser.add_argument('--left-topic', default='/left/image_raw',
                         help='left image topic (default: %(default)s)')
     parser.add_argument('--right-topic', default='/right/image_raw',
@@ -419,7 +385,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument('--storage', choices=sorted(STORAGES),
                         help="output storage (default: the input's)")
     parser.add_argument('--force', action='store_true',
-                        help='replace an existing OUTPUT_BAG (and --csv file)')
+                        help='replace an existing OUTPUT_BAG (only a bag: metadata.yaml and '
+                             '.db3/.mcap files) and --csv file')
     parser.add_argument('--csv', metavar='FILE',
                         help='write one CSV row per processed pair to FILE')
     parser.add_argument('--keep-partial', action='store_true',
@@ -467,11 +434,11 @@ def main(argv: list[str] | None = None) -> int:
     except SystemExit as exc:  # --help, or a usage error already printed by argparse
         return int(exc.code) if isinstance(exc.code, int) else EXIT_REFUSED
     try:
-        config = (load_params_file(args.params_file) if args.params_file
+        config = (load_params_file(args.params_file, args.node_name) if args.params_file
                   else PlaneNodeConfig())
     except ConfigError as err:
-        _error(str(err) if args.params_file in str(err)
-               else f'params file {args.params_file!r}: {err}')
+        _error((str(err) if args.params_file in str(err)
+                else f'params file {args.params_file!r}: {err}') + node_name_hint(err))
         return EXIT_REFUSED
     progress = args.progress if args.progress is not None else sys.stderr.isatty()
     installed, previous = _terminate_like_ctrl_c()

@@ -10,13 +10,15 @@ rosbags' own types (its typestore); nothing here imports rclpy.
 
 from __future__ import annotations
 
+from dataclasses import replace
 import os
 from pathlib import Path
 from typing import Any, Iterable, Iterator, NamedTuple
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.image import message_to_gray
-from domplane_ros.errors import BagError, clip_text, ImageDecodeError
+from domplane_ros.errors import BagError, clip_text, ConfigError, ImageDecodeError
+from domplane_ros.ros.camera_info import camera_model
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 from domplane_ros.stream.session import DEFAULT_TOPICS, ProcessedPair, StreamSession
 from domplane_ros.stream.sync import ApproximateTimeSync, Pair, Side
@@ -27,6 +29,9 @@ from rosbags.typesys import get_typestore, Stores
 IMAGE_TYPE = 'sensor_msgs/msg/Image'
 COMPRESSED_IMAGE_TYPE = 'sensor_msgs/msg/CompressedImage'
 IMAGE_TYPES = (IMAGE_TYPE, COMPRESSED_IMAGE_TYPE)
+CAMERA_INFO_TYPE = 'sensor_msgs/msg/CameraInfo'
+# BagMessage.side of the camera_info.topic's messages.
+CAMERA_INFO = 'camera_info'
 
 # One processed pair of a replay (the session's processed pair; the name the tools use).
 ReplayedFrame = ProcessedPair
@@ -143,6 +148,40 @@ class ReplaySession(StreamSession):
                  topics: tuple[str, str] = DEFAULT_TOPICS) -> None:
         """Make a fresh session whose clock starts at the first message's stamp."""
         super().__init__(config, topics, start=None, tick_s=1e-9)
+        self._camera_model: tuple[float, ...] | None = None   # the K applied to the prior
+
+    def apply_camera_info(self, msg: Any) -> str:
+        """Narrow the prior from the left camera's K, as plane_node does (once per distinct K).
+
+        ``prior.focal_px`` becomes f x [1 - t, 1 + t] (t = ``camera_info.focal_tolerance``)
+        and ``prior.principal_point_px`` K's (cx, cy); the new prior starts one search.
+
+        Args:
+            msg: A ``sensor_msgs/CameraInfo`` (rosbags or rclpy).
+
+        Returns:
+            What was done, in one line for the summary ('' for a K applied before).
+
+        """
+        try:
+            model = camera_model(msg)
+        except ValueError as err:
+            return f'{err}; ignored, the prior stays as configured'
+        key = (model.focal_px, *model.principal_px)
+        if self._camera_model is not None and np.allclose(key, self._camera_model, rtol=1e-6):
+            return ''
+        self._camera_model = key
+        tolerance = self.config.transport.camera_info_focal_tolerance
+        low, high = model.prior_values(tolerance)['prior.focal_px']
+        try:
+            prior = replace(self.config.prior, focal_px=(low, high),
+                            principal_point_px=tuple(model.principal_px))
+        except ConfigError as err:
+            return f'camera_info not applied to the prior: {err}'
+        self.update_config(replace(self.config, prior=prior))
+        return (f'prior from camera_info: focal_px [{low:.1f}, {high:.1f}] (f '
+                f'{model.focal_px:.1f} +-{100 * tolerance:g} %), principal point '
+                f'({model.principal_px[0]:.1f}, {model.principal_px[1]:.1f})')
 
     def add(self, side: Side, msg: Any) -> list[ReplayedFrame]:
         """Add one image message and process the pairs it completes.
@@ -181,9 +220,9 @@ class ReplaySession(StreamSession):
 
 
 class BagMessage(NamedTuple):
-    """One image message read from the bag."""
+    """One message read from the bag: an image (side left or right) or a CameraInfo."""
 
-    side: Side
+    side: str   # 'left', 'right' or CAMERA_INFO
     bag_time_ns: int
     msg: Any
 
@@ -204,6 +243,13 @@ def _damage_hint(err: BaseException) -> str:
     return ''
 
 
+def _bag_topic(name: str, topics: dict[str, str]) -> str:
+    """Return the bag's topic for ``name``: itself, or ``/name`` for a relative name."""
+    if name not in topics and '/' + name in topics:
+        return '/' + name   # relative, as the node's names are: 'left/image_raw'
+    return name
+
+
 def _storage_name(reader: Reader) -> str:
     """Return 'sqlite3' or 'mcap' for an open reader."""
     storage = reader.storage
@@ -217,19 +263,26 @@ class BagInput:
 
     Args:
         path: The bag folder (with metadata.yaml) or a single ``.db3`` or ``.mcap`` file.
-        left_topic: Left image topic.
-        right_topic: Right image topic.
+        left_topic: Left image topic; a relative name (``left/image_raw``) finds
+            ``/left/image_raw``, as a node in the root namespace resolves it.
+        right_topic: Right image topic (relative names as for ``left_topic``).
+        camera_info_topic: The node's ``camera_info.topic`` ('' for none): its messages are
+            yielded too, side :data:`CAMERA_INFO`. Missing from the bag: :attr:`notes` says
+            so and the prior stays as configured, as the node's would without it.
 
     Raises:
         BagError: If the bag does not exist or cannot be opened, or a topic is missing or is
-            not an image topic; the message lists the bag's image topics.
+            not an image topic (the message lists the bag's image topics), or the
+            camera_info topic is not a CameraInfo topic.
 
     """
 
     def __init__(self, path: str | os.PathLike[str], left_topic: str,
-                 right_topic: str) -> None:
+                 right_topic: str, camera_info_topic: str = '') -> None:
         """Open the bag and check the topics."""
         self.path = Path(path)
+        self.notes: list[str] = []
+        self.camera_info_topic = ''
         if not self.path.exists():
             raise BagError(f'input bag {str(self.path)!r} does not exist')
         self.typestore = typestore()
@@ -257,6 +310,7 @@ class BagInput:
                 listing += f' and {len(image_topics) - 10} more'
             self.sides: dict[str, Side] = {}
             for side, topic in (('left', left_topic), ('right', right_topic)):
+                topic = _bag_topic(topic, topics)
                 if topic not in topics:
                     raise BagError(f'{side} topic {topic!r} is not in bag {str(self.path)!r}; '
                                    f'image topics in the bag: {listing}')
@@ -266,15 +320,30 @@ class BagInput:
                                    f'{IMAGE_TYPE} or {COMPRESSED_IMAGE_TYPE}; image topics '
                                    f'in the bag: {listing}')
                 self.sides[topic] = side
-            if left_topic == right_topic:
+            if len(self.sides) < 2:
                 raise BagError(f'left and right topics are the same: {left_topic!r}')
-            self.connections = [c for c in self._reader.connections if c.topic in self.sides]
+            self._camera_info(camera_info_topic, topics)
+            self.connections = [c for c in self._reader.connections
+                                if c.topic in self.sides or c.topic == self.camera_info_topic]
             self.counts = {side: sum(c.msgcount for c in self.connections
-                                     if self.sides[c.topic] == side)
+                                     if self.sides.get(c.topic) == side)
                            for side in ('left', 'right')}
         except BaseException:
             self.close()
             raise
+
+    def _camera_info(self, name: str, topics: dict[str, str]) -> None:
+        if not name:
+            return
+        topic = _bag_topic(name, topics)
+        if topic not in topics:
+            self.notes.append(f'camera_info.topic {clip_text(name, 80)!r} is not in the bag: '
+                              'the prior stays as configured')
+        elif topics[topic] != CAMERA_INFO_TYPE:
+            raise BagError(f'camera_info.topic {topic!r} has type '
+                           f'{clip_text(topics[topic], 80)}, not {CAMERA_INFO_TYPE}')
+        else:
+            self.camera_info_topic = topic
 
     def sides_topics(self) -> tuple[str, str]:
         """Return the ``(left, right)`` topic names."""
@@ -312,7 +381,8 @@ class BagInput:
                     f'{connection.topic} message {count} cannot be deserialised: '
                     f'{describe_error(err)}')
                 continue
-            yield BagMessage(self.sides[connection.topic], int(bag_time_ns), msg)
+            yield BagMessage(self.sides.get(connection.topic, CAMERA_INFO), int(bag_time_ns),
+                             msg)
 
     def close(self) -> None:
         """Close the bag (idempotent)."""

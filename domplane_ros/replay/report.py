@@ -109,6 +109,8 @@ class ReplaySummary:
         input_problems: Input problems seen, by diagnostics key (only the non-zero ones).
         no_pairs: Why the bag gave no pair to process ('' if it gave some); then nothing
             was written.
+        notes: What the run did with the node's inputs beside the images (the prior from
+            ``camera_info.topic``, a topic it could not replay).
 
     """
 
@@ -132,6 +134,7 @@ class ReplaySummary:
     first_errors: list[str] = field(default_factory=list)
     input_problems: dict[str, int] = field(default_factory=dict)
     no_pairs: str = ''
+    notes: list[str] = field(default_factory=list)
 
     @property
     def rate_pairs_per_s(self) -> float:
@@ -169,5 +172,6 @@ class ReplaySummary:
         if self.input_problems:
             out.append('  input problems:  ' + ', '.join(
                 f'{key} {count}' for key, count in self.input_problems.items()))
+        out += [f'  note: {text}' for text in self.notes]
         out += [f'  error: {text}' for text in self.first_errors]
         return out

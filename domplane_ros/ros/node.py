@@ -41,7 +41,7 @@ from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import (InvalidParameterTypeException, InvalidParameterValueException,
-                              ParameterException)
+                              ParameterException, ParameterNotDeclaredException)
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -51,6 +51,14 @@ from sensor_msgs.msg import CameraInfo, CompressedImage, Image, JointState
 from std_msgs.msg import Float64MultiArray
 
 _THROTTLE_S = 5.0
+
+
+class UnknownParameterError(ParameterNotDeclaredException):
+    """A parameter that is not declared was set; the message names the nearest declared one."""
+
+    def __init__(self, name: str) -> None:
+        """Make the error of the undeclared parameter ``name``."""
+        Exception.__init__(self, unknown_parameter_message(name))
 
 
 def _stamp_ns(msg: Any) -> int:
@@ -89,6 +97,7 @@ class PlaneNode(Node):
         self._subs = self._make_subscriptions(config)
         topics = tuple(sub.topic_name for sub in self._subs)
         self.session = StreamSession(config, topics, start=time.monotonic())
+        self.add_pre_set_parameters_callback(self._refuse_unknown)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self._diag_timer = self.create_timer(config.transport.diagnostics_period_s,
                                              self.publish_diagnostics)
@@ -177,6 +186,15 @@ class PlaneNode(Node):
             values[spec.name] = check_value(spec, _plain(value))
         self._check_unknown_overrides()
         return values
+
+    def _refuse_unknown(self, parameter_list: list[Parameter]) -> list[Parameter]:
+        # A pre-set callback runs before rclpy's own undeclared check, which refuses an
+        # undeclared name with 'Invalid access to undeclared parameter(s): []' (its generator
+        # is spent by then): ros2 param set gets the name and the nearest declared one instead.
+        for param in parameter_list:
+            if not self.has_parameter(param.name):
+                raise UnknownParameterError(param.name)
+        return list(parameter_list)
 
     def _check_unknown_overrides(self) -> None:
         overrides = getattr(self, '_parameter_overrides', {}) or {}
@@ -387,6 +405,14 @@ class PlaneNode(Node):
             implausible_joint_states=(self.implausible_joint_states
                                       if self._joint_sub is not None else None))
         if message.startswith('no images on '):
+            silent = [self.session.activity.topics[side] for side in SIDES
+                      if side in self._qos_warned
+                      and self.session.activity.topics[side] in message]
+            if silent:
+                # The log said it once, at discovery; the status says it while it lasts.
+                wanted = 'reliable' if self.config.transport.reliable else 'best effort'
+                message += (f'; a publisher on {", ".join(silent)} offers QoS incompatible '
+                            f'with this {wanted} subscription: set qos.reliable to match it')
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in self.session.last_cameras)
         slop_s = self.config.sync.slop_s

@@ -21,6 +21,7 @@ topics (relative: -r __ns:=/robot puts them under /robot):
                                          as the left image: state, confidence, homography
   out  plane/homography                  std_msgs/Float64MultiArray, only with a plane
   out  plane/mask, plane/debug_image     sensor_msgs/Image, left image's header
+  out  plane/parallax                    sensor_msgs/Image 32FC1, residual parallax [px]
   out  /diagnostics                      diagnostic_msgs/DiagnosticArray
 
 examples:

@@ -155,10 +155,9 @@ def test_refusals_exit_2_with_one_line_and_write_nothing(tmp_path, frames, capsy
 def test_force_replaces_existing_output(tmp_path, frames):
     write_bag(tmp_path / 'in', frames[:3], 'sqlite3')
     out = tmp_path / 'out'
-    out.mkdir()
-    (out / 'old.txt').write_text('old')
+    write_bag(out, frames[:1], 'mcap')   # an earlier bag: metadata.yaml and out.mcap
     assert main([str(tmp_path / 'in'), str(out), '--force', '--no-progress']) == 0
-    assert not (out / 'old.txt').exists()
+    assert not (out / 'out.mcap').exists()
     assert len(read_bag(out)['messages']['/plane/mask']) == 3
     inputs = {'in'} | {f'in/{p}' for p in tree(tmp_path / 'in')}
     assert tree(tmp_path) == inputs | {'out', 'out/metadata.yaml', 'out/out.db3'}
