@@ -155,16 +155,20 @@ def _encoding_layout(encoding: Any) -> _EncodingLayout:
             f'{", ".join(SUPPORTED_ENCODINGS)}', kind='encoding') from None
 
 
-def image_to_array(msg: Any) -> tuple[np.ndarray, str]:
+def image_to_array(msg: Any, copy: bool = True) -> tuple[np.ndarray, str]:
     """Decode a raw ``sensor_msgs/Image`` into its native numpy array.
 
     Args:
         msg: An object with the fields ``encoding``, ``height``, ``width``, ``step``,
             ``is_bigendian`` and ``data`` of ``sensor_msgs/Image``.
+        copy: False: an 8-bit image without row padding is returned as a read-only view
+            of the message's data (no copy of a 8 MB 4K frame); the message must then not
+            change while the array is used.
 
     Returns:
         A tuple ``(array, encoding)``. ``array`` is a new C-contiguous array that shares no
-        memory with the message: ``(H, W) uint8`` for mono8 and 8UC1, ``(H, W) uint16`` in
+        memory with the message (with ``copy`` False it may be a read-only view of it):
+        ``(H, W) uint8`` for mono8 and 8UC1, ``(H, W) uint16`` in
         native byte order for mono16, and ``(H, W, C) uint8`` in the encoding's channel order
         for rgb8, bgr8, 8UC3 (C = 3), rgba8 and bgra8 (C = 4). ``encoding`` is the message's
         encoding.
@@ -207,10 +211,13 @@ def image_to_array(msg: Any) -> tuple[np.ndarray, str]:
             strides = (step, layout.channels, 1)
     # A strided view skips the row padding; astype copies into native byte order.
     view = np.ndarray(shape=shape, dtype=dtype, buffer=data, strides=strides)
+    if not copy and layout.bytes_per_channel == 1 and view.flags.c_contiguous:
+        view.flags.writeable = False
+        return view, msg.encoding
     return view.astype(dtype.newbyteorder('='), order='C', copy=True), msg.encoding
 
 
-def image_to_gray(msg: Any) -> np.ndarray:
+def image_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
     """Decode a raw ``sensor_msgs/Image`` to an 8-bit gray image.
 
     Colour encodings are converted with OpenCV's ITU-R BT.601 luma weights. mono16 is scaled
@@ -220,15 +227,19 @@ def image_to_gray(msg: Any) -> np.ndarray:
         msg: An object with the fields ``encoding``, ``height``, ``width``, ``step``,
             ``is_bigendian`` and ``data`` of ``sensor_msgs/Image``. Supported encodings are
             listed in :data:`SUPPORTED_ENCODINGS`.
+        copy: False: mono8 and 8UC1 without row padding come back as a read-only view of
+            the message's data, and colour is converted from the data in place (see
+            :func:`image_to_array`).
 
     Returns:
-        ``(H, W) uint8`` C-contiguous array that shares no memory with the message.
+        ``(H, W) uint8`` C-contiguous array that shares no memory with the message (with
+        ``copy`` False, a read-only view of it for mono8 and 8UC1).
 
     Raises:
         ImageDecodeError: As :func:`image_to_array`.
 
     """
-    array, encoding = image_to_array(msg)
+    array, encoding = image_to_array(msg, copy)
     layout = _LAYOUTS[encoding]
     if layout.bytes_per_channel == 2:
         return (array >> 8).astype(np.uint8)
@@ -279,12 +290,14 @@ def compressed_to_gray(msg: Any) -> np.ndarray:
     return np.ascontiguousarray(gray)
 
 
-def message_to_gray(msg: Any) -> np.ndarray:
+def message_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
     """Decode a raw or compressed image message to an 8-bit gray image.
 
     Args:
         msg: A ``sensor_msgs/Image`` or ``sensor_msgs/CompressedImage`` like object; objects
             with a ``format`` attribute are treated as compressed.
+        copy: False: a raw mono8 image may come back as a read-only view of the message's
+            data (:func:`image_to_gray`).
 
     Returns:
         ``(H, W) uint8`` C-contiguous array.
@@ -295,7 +308,7 @@ def message_to_gray(msg: Any) -> np.ndarray:
     """
     if hasattr(msg, 'format'):
         return compressed_to_gray(msg)
-    return image_to_gray(msg)
+    return image_to_gray(msg, copy)
 
 
 def gray_to_image_fields(array: np.ndarray, encoding: str = 'mono8') -> dict[str, Any]:

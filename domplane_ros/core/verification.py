@@ -236,13 +236,23 @@ def _check_roi(roi: Sequence[float] | None) -> tuple[float, float, float, float]
     return (0.0, 0.0, 1.0, 1.0) if roi is None else check_roi(roi)
 
 
-def _shrink(image: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
+def _shrink(image: np.ndarray, width: int, level: tuple[np.ndarray, int] | None = None
+            ) -> tuple[np.ndarray, np.ndarray]:
     """Return the image at ``width`` columns (never enlarged) and its (3, 3) pixel map.
 
     Halves with ``cv2.pyrDown`` (Gaussian, cheaper than area averaging at 640 x 480) while the
-    image is at least twice as wide as asked, then area-averages the rest of the way.
+    image is at least twice as wide as asked, then area-averages the rest of the way. A
+    ``level`` ``(image L times pyrDown-ed, L)`` that this chain passes through is started
+    from instead of halving the full image again (the same pixels: the same calls).
     """
     pixel_map = np.eye(3)
+    if level is not None and level[1] > 0 and _halvings(image.shape[1], width) >= level[1]:
+        start, times = level
+        if start.shape != _halved_shape(image.shape, times):
+            raise ValueError(f'a pyramid level {times} of a {image.shape} image has shape '
+                             f'{_halved_shape(image.shape, times)}, not {start.shape}')
+        image = start
+        pixel_map = np.diag([0.5 ** times, 0.5 ** times, 1.0])
     while image.shape[1] >= 2 * width:
         image = cv2.pyrDown(image)
         # pyrDown centres output pixel i on input pixel 2 i.
@@ -253,6 +263,22 @@ def _shrink(image: np.ndarray, width: int) -> tuple[np.ndarray, np.ndarray]:
         image = cv2.resize(image, (width, new_h), interpolation=cv2.INTER_AREA)
         pixel_map = resize_homography(width / full_w, new_h / height) @ pixel_map
     return image, pixel_map
+
+
+def _halvings(full_width: int, width: int) -> int:
+    """Return how many times :func:`_shrink` halves an image ``full_width`` wide."""
+    count = 0
+    while full_width >= 2 * width:
+        full_width, count = (full_width + 1) // 2, count + 1
+    return count
+
+
+def _halved_shape(shape: tuple[int, ...], times: int) -> tuple[int, ...]:
+    """Return the shape of ``cv2.pyrDown`` applied ``times`` times to an image of ``shape``."""
+    height, width = shape[:2]
+    for _ in range(times):
+        height, width = (height + 1) // 2, (width + 1) // 2
+    return (height, width) + tuple(shape[2:])
 
 
 @dataclass(frozen=True)
@@ -320,23 +346,37 @@ class WorkingPair:
 
 
 def working_pair(left: np.ndarray, right: np.ndarray,
-                 config: VerificationConfig = VerificationConfig()) -> WorkingPair:
+                 config: VerificationConfig = VerificationConfig(),
+                 levels: tuple[np.ndarray, np.ndarray, int] | None = None) -> WorkingPair:
     """Return the pair at ``config.working_width_px``, for :func:`verify_plane`'s ``working``.
 
     Verifying several planes on one pair (a search's candidates) shrinks the images once.
 
+    Args:
+        left: (H, W) uint8 left image.
+        right: (H, W) uint8 right image.
+        config: The verification's settings (its working width).
+        levels: ``(left level, right level, L)``: the images ``cv2.pyrDown`` L times (the
+            pipeline's working level); the shrink starts from them when it halves at least
+            L times, and gives the same images as from the full ones.
+
     Raises:
-        ValueError: As :func:`verify_plane` for the images.
+        ValueError: As :func:`verify_plane` for the images, or if a level's shape is not
+            the L-th pyrDown's.
 
     """
     left, right = _check_pair(left, right)
-    return _working(left, right, config)
+    return _working(left, right, config, levels)
 
 
-def _working(left: np.ndarray, right: np.ndarray, config: VerificationConfig) -> WorkingPair:
-    left_small, scale_left = _shrink(left, config.working_width_px)
+def _working(left: np.ndarray, right: np.ndarray, config: VerificationConfig,
+             levels: tuple[np.ndarray, np.ndarray, int] | None = None) -> WorkingPair:
+    left_level = right_level = None
+    if levels is not None:
+        left_level, right_level = (levels[0], levels[2]), (levels[1], levels[2])
+    left_small, scale_left = _shrink(left, config.working_width_px, left_level)
     right_small, scale_right = _shrink(right, int(round(
-        config.working_width_px * right.shape[1] / left.shape[1])))
+        config.working_width_px * right.shape[1] / left.shape[1])), right_level)
     return WorkingPair(left_small, scale_left, right_small, scale_right,
                        (int(left.shape[0]), int(left.shape[1])), int(config.working_width_px))
 

@@ -29,6 +29,7 @@ from domplane_ros.ros.messages import descriptor, diagnostics_msg, homography_ms
 from domplane_ros.ros.messages import parallax_msg, READ_ONLY, result_msg
 from domplane_ros.ros.startup import check_params_files, init_rclpy
 from domplane_ros.ros.usage import usage, wants_help
+from domplane_ros.ros.wire import image_from_cdr
 from domplane_ros.stream.frame import parallax_image
 from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
@@ -137,14 +138,18 @@ class PlaneNode(Node):
         # image_transport's convention: the compressed stream of a (remapped) image topic T
         # is T/compressed, so remapping left/image_raw serves both transports.
         compressed = transport.image_transport == 'compressed'
+        # Raw images arrive serialised (raw=True) and are read in place (ros/wire.py): rclpy
+        # would turn every one into a Python message, also those the hand-over drops.
         subs = [
             self.create_subscription(
                 CompressedImage if compressed else Image,
                 (self.resolve_topic_name(f'{side}/image_raw') + '/compressed' if compressed
                  else f'{side}/image_raw'),
-                lambda msg, s=side: self.on_image(s, msg), qos,
+                ((lambda msg, s=side: self.on_image(s, msg)) if compressed
+                 else (lambda raw, s=side: self._on_serialised_image(s, raw))), qos,
                 event_callbacks=SubscriptionEventCallbacks(
-                    incompatible_qos=lambda info, s=side: self._on_incompatible_qos(s, info)))
+                    incompatible_qos=lambda info, s=side: self._on_incompatible_qos(s, info)),
+                raw=not compressed)
             for side in SIDES]
         self._camera_info_sub = None
         if transport.camera_info_topic:
@@ -254,6 +259,17 @@ class PlaneNode(Node):
             self._warn_input(warning)
         for pair in pairs:
             self.slot.put(pair)
+
+    def _on_serialised_image(self, side: str, raw: bytes) -> None:
+        """Take one serialised image: read its fields in place, then as :meth:`on_image`."""
+        try:
+            msg = image_from_cdr(raw)
+        except Exception as err:  # noqa: B902 - rclpy raises its own types for bad bytes
+            error = f'{self.session.activity.topics[side]}: undecodable image message: {err}'
+            self.session.note_undecodable(error)
+            self._warn_input(error, key='undecodable ' + side)
+            return
+        self.on_image(side, msg)
 
     def _on_camera_info(self, msg: CameraInfo) -> None:
         """Narrow the prior from the left camera's K (once per distinct K)."""

@@ -177,7 +177,8 @@ class PlanePipeline:
         feats, track_pts, motions, carried, spans = self._features(*work)
         self.stats.carried += carried is not None
         t3 = time.perf_counter()
-        self._trust.begin_pair(left, right)  # every plane of this pair shares one shrink
+        # Every plane of this pair shares one shrink, from the working level.
+        self._trust.begin_pair(left, right, (work[0].image, work[1].image, work[0].level))
         try:
             step = self._estimate(PairStep(left=left, right=right), feats, motions, fast)
         finally:

@@ -267,8 +267,10 @@ class StreamSession:
         """
         t0 = time.perf_counter()
         try:
-            left = message_to_gray(pair.left)
-            right = message_to_gray(pair.right)
+            # Read-only, views of the messages' data where the encoding allows (no copy of
+            # a 4K frame); the pair holds its messages, which nothing changes.
+            left = _read_only(message_to_gray(pair.left, copy=False))
+            right = _read_only(message_to_gray(pair.right, copy=False))
         except ImageDecodeError as err:
             self._decode_failed(err)
             return None
@@ -359,3 +361,9 @@ class StreamSession:
             joint_speed=joint_speed, implausible_joint_speed=implausible_joint_speed,
             implausible_joint_states=implausible_joint_states,
             plane=self.config.verification.plane)
+
+
+def _read_only(image: np.ndarray) -> np.ndarray:
+    """Return ``image`` marked read-only (the pipeline's checks then keep it uncopied)."""
+    image.flags.writeable = False
+    return image

@@ -129,23 +129,27 @@ class TrustGate:
         self._locked_frames = 0
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
+        self._levels: tuple[np.ndarray, np.ndarray, int] | None = None
         self._coarse_planes: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
         self._uniqueness = Uniqueness(self._coarse, self._per_pair, self._maps)
 
-    def begin_pair(self, left: np.ndarray, right: np.ndarray) -> None:
+    def begin_pair(self, left: np.ndarray, right: np.ndarray,
+                   levels: tuple[np.ndarray, np.ndarray, int] | None = None) -> None:
         """Shrink this pair once for every plane judged on it until :meth:`end_pair`.
 
         Only for these very arrays, which must not change until then; planes judged on other
-        images are verified as without it. The results are the same either way.
+        images are verified as without it. The results are the same either way. ``levels``
+        (the pair ``cv2.pyrDown`` L times, and L: the pipeline's working level) spares the
+        shrink those halvings (:func:`~domplane_ros.core.verification.working_pair`).
         """
-        self._pair, self._working = (left, right), None
+        self._pair, self._working, self._levels = (left, right), None, levels
         self._coarse_planes = {}
         self._verified = {}
 
     def end_pair(self) -> None:
         """Forget the pair of :meth:`begin_pair`."""
-        self._pair = self._working = None
+        self._pair = self._working = self._levels = None
         self._coarse_planes = {}
         self._verified = {}
 
@@ -164,7 +168,7 @@ class TrustGate:
         if self._pair is None or self._pair[0] is not left or self._pair[1] is not right:
             return None
         if self._working is None or self._working.width != config.working_width_px:
-            self._working = working_pair(left, right, config)
+            self._working = working_pair(left, right, config, self._levels)
         return self._working
 
     def _maps(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,

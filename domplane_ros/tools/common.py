@@ -180,3 +180,17 @@ def add_output_argument(parser: argparse.ArgumentParser, default: str | Path, wh
     """Add the output folder option (``--out`` or ``--output``) as a :class:`Path`."""
     parser.add_argument(flag, type=Path, default=Path(default),
                         help=f'output folder for {what} (default {default})')
+
+
+def stop_process(proc: Any) -> None:
+    """Stop a child process (a ``subprocess.Popen``): Ctrl-C, then kill after 10 s."""
+    import signal
+    import subprocess
+
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()

@@ -22,7 +22,6 @@ import argparse
 import os
 from pathlib import Path
 import random
-import signal
 import subprocess
 import sys
 import tempfile
@@ -34,7 +33,7 @@ from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.truth import every_floor_pixel, transfer_error_px
 from domplane_ros.tools.common import (add_size_arguments, machine_name, ONE_THREAD_ENV,
-                                       rss_mb, tool_parser)
+                                       rss_mb, stop_process, tool_parser)
 import numpy as np
 
 
@@ -99,17 +98,6 @@ def _dds_env(args: argparse.Namespace) -> dict[str, str]:
     return dds
 
 
-def _stop(node_proc: subprocess.Popen) -> None:
-    """Stop the node process: Ctrl-C, then kill after 10 s."""
-    if node_proc.poll() is None:
-        node_proc.send_signal(signal.SIGINT)
-        try:
-            node_proc.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            node_proc.kill()
-            node_proc.wait()
-
-
 def run(args: argparse.Namespace) -> int:
     """Run the load test and print its figures; return the exit code."""
     ros = _ros()
@@ -130,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         try:
             return _drive(args, frames, node_proc, ros)
         finally:
-            _stop(node_proc)
+            stop_process(node_proc)
 
 
 class _LoadDriver:

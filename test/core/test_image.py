@@ -128,6 +128,14 @@ def test_decode_every_encoding_with_padding(kind, encoding, padding, bigendian):
     assert gray.shape == (HEIGHT, WIDTH) and gray.dtype == np.uint8
     np.testing.assert_array_equal(gray, _expected_gray(encoding, native))
     np.testing.assert_array_equal(message_to_gray(msg), gray)
+    # Without a copy: the same pixels; a view of the message's data only where it can be.
+    view = message_to_gray(msg, copy=False)
+    np.testing.assert_array_equal(view, gray)
+    assert view.flags.c_contiguous and view.dtype == np.uint8
+    data = np.frombuffer(memoryview(msg.data).cast('B'), np.uint8)
+    aliased = encoding in ('mono8', '8UC1') and padding == 0
+    assert np.shares_memory(view, data) == aliased
+    assert view.flags.writeable != aliased
 
 
 def test_rclpy_image_data_reads_back_as_array_of_bytes():

@@ -355,3 +355,30 @@ def test_agreement_maps_without_the_peak_on_the_shared_pair_are_the_same() -> No
     with pytest.raises(ValueError, match='working images'):
         verification.agreement_maps(frame.left[:, :-8], frame.right[:, :-8],
                                     frame.homography, config, working=working)
+
+
+@pytest.mark.parametrize('scale', [2, 6])
+def test_the_shrink_starts_from_the_working_level_with_the_same_images(scale: int) -> None:
+    """A pair's pyramid level gives the working pair the full images give, and is used."""
+    from domplane_ros.core.pyramid import WorkingImage
+    from domplane_ros.sim.generators import random_scene
+    frame = random_scene(2)
+    size = (frame.left.shape[1] * scale, frame.left.shape[0] * scale)
+    left, right = (cv2.resize(image, size, interpolation=cv2.INTER_CUBIC)
+                   for image in (frame.left, frame.right))
+    config = verification.VerificationConfig(working_width_px=min(480, size[0] // 2))
+    work = [WorkingImage.of(image, 1280, 0.6) for image in (left, right)]
+    assert work[0].level >= 1
+    levels = (work[0].image, work[1].image, work[0].level)
+    plain = verification.working_pair(left, right, config)
+    shared = verification.working_pair(left, right, config, levels)
+    for name in ('left', 'left_map', 'right', 'right_map'):
+        assert np.array_equal(getattr(shared, name), getattr(plain, name)), name
+    # The level is what the shrink starts from (a level of another picture shows through).
+    other = verification.working_pair(left, right, config,
+                                      (255 - levels[0], levels[1], levels[2]))
+    assert not np.array_equal(other.left, plain.left)
+    assert np.array_equal(other.right, plain.right)
+    with pytest.raises(ValueError, match='pyramid level'):
+        verification.working_pair(left, right, config,
+                                  (levels[0][:-2], levels[1], levels[2]))

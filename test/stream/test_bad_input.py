@@ -18,8 +18,8 @@ from domplane_ros.core.image import gray_to_image_fields, message_to_gray
 from domplane_ros.errors import ImageDecodeError
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.stream.health import (_identical, clipped_reason, inlier_spread,
-                                        input_diagnostic_values, problem_key, StampChecks,
-                                        Throttle)
+                                        input_diagnostic_values, PairChecks, problem_key,
+                                        StampChecks, Throttle)
 import domplane_ros.stream.pipeline as pipeline_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import ERROR, OK, plane_status, WARN
@@ -428,14 +428,31 @@ def test_random_pairs_give_a_valid_result_or_a_failure_with_reason(frames):
 
 def test_large_frames_are_checked_on_a_grid_with_the_same_answers():
     # 3840 x 2160: the clipped fractions come from a regular grid, the frozen check compares
-    # a sparse grid first; both must still give the whole image's answer.
+    # every 16th row first; both must still give the whole image's answer.
     rng = np.random.default_rng(7)
     big = rng.integers(20, 230, (2160, 3840), dtype=np.uint8)
     big[:1400] = 0  # 65 % black
     assert 'left image is black: 65 %' in clipped_reason(big, 'left', 0.6)
     assert clipped_reason(big, 'left', 0.7) == ''
     other = big.copy()
-    other[2001, 3001] ^= 1  # one pixel off the sparse grid differs
+    other[2001, 3001] ^= 1  # one pixel off the sampled rows differs
     assert not _identical(big, other)
     assert _identical(big, big.copy())
     assert not _identical(big, big[:, :-1])
+
+
+def test_the_frozen_check_copies_a_writable_image_and_keeps_a_read_only_one():
+    # A caller that refills one writable buffer in place still shows a change (the check
+    # kept a copy); a read-only image (the session's: views of messages) is kept as is.
+    rng = np.random.default_rng(3)
+    first, second, right = (rng.integers(0, 256, (48, 64), dtype=np.uint8) for _ in range(3))
+    checks = PairChecks()
+    buffer = first.copy()
+    assert checks.check(buffer, right, STAMP0, PipelineConfig()).refused == ''
+    buffer[:] = second  # the left camera moved on, the right one repeats its image
+    refused = checks.check(buffer, right, STAMP0 + S // 10, PipelineConfig()).refused
+    assert refused.startswith('right camera frozen')
+    fixed = second.copy()
+    fixed.flags.writeable = False
+    checks.check(fixed, right, STAMP0 + 2 * S // 10, PipelineConfig())
+    assert checks._last_images[0] is fixed and checks._last_images[1] is not right
