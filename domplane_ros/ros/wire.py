@@ -23,7 +23,9 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-_LITTLE_ENDIAN_CDR = (b'\x00\x01', b'\x00\x03')  # CDR_LE, PL_CDR_LE
+# Plain little-endian CDR only: a parameter-list encapsulation (PL_CDR_LE, 0x0003) puts a
+# member header before every field and goes to rclpy like any other layout.
+_LITTLE_ENDIAN_CDR = (b'\x00\x01',)  # CDR_LE
 _HEADER_BYTES = 4
 _UINT32 = struct.Struct('<I')
 
