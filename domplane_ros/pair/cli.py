@@ -42,6 +42,7 @@ from domplane_ros.pair.files import image_pairs, ImagePair, PairInputError, read
 from domplane_ros.params_file import node_name_hint
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.stream.status import reason_for_arguments
 import numpy as np
 
 PROG = 'plane_pair'
@@ -134,11 +135,13 @@ def run_pairs(pairs: Sequence[ImagePair], config: PlaneNodeConfig, out: Path | N
     outcomes = []
     for index, pair in enumerate(pairs):
         try:
-            left, right = read_pair(pair)
+            left, right, image_warning = read_pair(pair, config.image.mono16_bits)
         except PairInputError as err:
             outcomes.append(PairOutcome(pair, None, str(err)))
             continue
         result = pipeline.process(left, right, _STAMP0_NS + index * period_ns)
+        if image_warning:
+            result = replace(result, warnings=(image_warning, *result.warnings))
         written: tuple[Path, ...] = ()
         if out is not None:
             written = _write_pictures(out, pair, left, result)
@@ -184,7 +187,7 @@ def _summary(result: FrameResult) -> str:
         return (f'plane found: state {result.state}, confidence {result.confidence:.2f}, '
                 f'{result.n_inliers} of {corners} left corners matched on the plane')
     return (f'no plane: state {result.state}, confidence {result.confidence:.2f}; '
-            f'{result.reason}')
+            f'{reason_for_arguments(result.reason)}')
 
 
 def format_outcome(outcome: PairOutcome) -> list[str]:
