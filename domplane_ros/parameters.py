@@ -301,7 +301,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Period of the /diagnostics status, seconds.', 0.05, 60.0),
     ParamSpec('diagnostics.silence_s', 1.0, 'float',
               'A camera that sends no image for this long is reported: /diagnostics WARN '
-              'naming its topic, and a throttled log warning.', 0.01, 3600.0),
+              'naming its topic (ERROR, with the reason, when the last pairs had no plane '
+              'for 3 pairs), and a throttled log warning.', 0.01, 3600.0),
 )
 
 PARAMETERS_BY_NAME: dict[str, ParamSpec] = {spec.name: spec for spec in PARAMETERS}

@@ -12,9 +12,12 @@ whole prior search in one pair (:func:`~domplane_ros.config.one_shot_search`); t
 two folders are one stream (each warm-starts from the last, as live), ``--fps`` apart.
 
 For each pair it prints the left-to-right homography (3x3, ``H[2][2] == 1``), the lock state,
-the verification confidence and, without a plane, the reason. ``--out DIR`` writes
-``NAME_overlay.png`` (the left image with the mask tint, the corners and a legend) and
-``NAME_mask.png`` (mono8: 255 plane, 127 obstacle, 0 undecided, as ``plane/mask``) per pair.
+the verification confidence and, without a plane, the reason (the node's reason, whose hint
+for swapped cameras names the LEFT and RIGHT arguments instead of the image topics).
+``--out DIR`` writes ``NAME_overlay.png`` (the left image with the mask tint, the corners and
+a legend) and ``NAME_mask.png`` (mono8: 255 plane, 127 obstacle, 0 undecided, as
+``plane/mask``) per pair. 16-bit image files are scaled by ``image.mono16_bits`` (from
+``--params-file``) as the node scales mono16 messages.
 
 Exit codes: 0 when every pair gave a plane; 4 when every pair was processed but at least one
 gave none (the reason is printed); 3 when pairs of two folders could not be read and were

@@ -203,7 +203,7 @@ def test_mono16_range_and_silence_after_errors_reach_log_and_diagnostics(ros_con
         time.sleep(0.2)
         level, message, _ = status()
         assert level == 2 and message.startswith('no images on /left/image_raw'), message
-        assert re.search(r"; last pairs: no plane for \d+ pairs: image rejected: unsupported "
+        assert re.search(r'; last pairs: no plane for \d+ pairs: image rejected: unsupported '
                          r"encoding 'nv12'", message), message
     finally:
         node.destroy_node()
