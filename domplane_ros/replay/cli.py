@@ -39,10 +39,10 @@ summary says "no pairs" and why, and nothing is written; 5 when the output is co
 written but no processed pair gave a plane (one line on stderr with the last pair's reason;
 ``plane_pair`` likewise exits non-zero, 4, for a pair without a plane; 3 takes precedence);
 2 when the run is refused before anything is written (missing, unreadable or truncated
-bag, a folder without metadata.yaml, unknown topic, existing output without ``--force`` or, with it, one that is not
-a bag, an output inside the input bag's folder or in one that cannot be written, invalid params
-file); 1 when reading or writing fails part-way (a damaged bag,
-a full disk): the partial output is removed, or on a read failure with ``--keep-partial``
+bag, a folder without metadata.yaml, unknown topic, existing output without ``--force`` or,
+with it, one that is not a bag, an output inside the input bag's folder or in one that
+cannot be written, invalid params file); 1 when reading or writing fails part-way (a damaged
+bag, a full disk): the partial output is removed, or on a read failure with ``--keep-partial``
 kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its metadata); 130 on
 Ctrl-C and 143 on SIGTERM, the partial output removed. Every error is one line on stderr.
 
