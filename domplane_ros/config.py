@@ -23,7 +23,7 @@ from domplane_ros.parameters import (check_value, default_params_yaml, FEATURE_K
 
 __all__ = [
     'ConfigError', 'EstimatorConfig', 'FEATURE_KINDS', 'FeatureConfig', 'HeadConfig',
-    'MaskConfig', 'PARAMETERS', 'PARAMETERS_BY_NAME', 'ParamSpec', 'PipelineConfig',
+    'ImageConfig', 'MaskConfig', 'PARAMETERS', 'PARAMETERS_BY_NAME', 'ParamSpec', 'PipelineConfig',
     'PlaneNodeConfig', 'POTENTIAL_NAMES', 'PriorConfig', 'SyncConfig', 'TrackingConfig',
     'TransportConfig', 'VerificationSettings', 'check_value', 'default_params_yaml',
     'flatten_params', 'load_params_file', 'one_shot_search', 'parameters_markdown',
@@ -180,6 +180,15 @@ class HeadConfig(_Section):
 
 
 @dataclass(frozen=True)
+class ImageConfig(_Section):
+    """Image decoding settings (see ``image.*`` in :data:`PARAMETERS`)."""
+
+    section: ClassVar[str] = 'image'
+
+    mono16_bits: int = 16
+
+
+@dataclass(frozen=True)
 class SyncConfig(_Section):
     """Approximate-time pairing settings (see ``sync.*`` in :data:`PARAMETERS`)."""
 
@@ -244,6 +253,7 @@ class PlaneNodeConfig:
     pipeline: PipelineConfig = field(default_factory=PipelineConfig)
     tracking: TrackingConfig = field(default_factory=TrackingConfig)
     head: HeadConfig = field(default_factory=HeadConfig)
+    image: ImageConfig = field(default_factory=ImageConfig)
     sync: SyncConfig = field(default_factory=SyncConfig)
     transport: TransportConfig = field(default_factory=TransportConfig)
     initial_homography: tuple[float, ...] = ()
@@ -312,6 +322,7 @@ class PlaneNodeConfig:
             pipeline=PipelineConfig(**section('pipeline')),
             tracking=TrackingConfig(**section('tracking')),
             head=HeadConfig(**section('head')),
+            image=ImageConfig(**section('image')),
             sync=SyncConfig(**section('sync')),
             transport=TransportConfig.from_flat(values),
             initial_homography=tuple(values['initial_homography']),

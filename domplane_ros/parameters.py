@@ -267,6 +267,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Joint states whose largest absolute velocity exceeds this (rad/s) are '
               'implausible: flagged in the log and /diagnostics and not used as a hint.',
               0.01, 1e4),
+    # Image decoding.
+    ParamSpec('image.mono16_bits', 16, 'int',
+              'Significant bits of mono16 images: 12 for a 12-bit sensor whose values are '
+              'below 4096, 10 for one below 1024. Decoding keeps the top 8 of them (values '
+              'above the range saturate); 16 keeps the high byte, as cv_bridge does. mono16 '
+              'pairs whose brightest grey uses under 1/16 of this range are reported (log, '
+              '/diagnostics image warning, replay note). mono8 and colour are not affected.',
+              8, 16),
     # Synchroniser and transport.
     ParamSpec('sync.slop_s', 0.01, 'float',
               'Largest left/right header stamp difference of a pair, in seconds.', 1e-6, 10.0),
@@ -293,7 +301,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Period of the /diagnostics status, seconds.', 0.05, 60.0),
     ParamSpec('diagnostics.silence_s', 1.0, 'float',
               'A camera that sends no image for this long is reported: /diagnostics WARN '
-              'naming its topic, and a throttled log warning.', 0.01, 3600.0),
+              'naming its topic (ERROR, with the reason, when the last pairs had no plane '
+              'for 3 pairs), and a throttled log warning.', 0.01, 3600.0),
 )
 
 PARAMETERS_BY_NAME: dict[str, ParamSpec] = {spec.name: spec for spec in PARAMETERS}

@@ -217,11 +217,65 @@ def image_to_array(msg: Any, copy: bool = True) -> tuple[np.ndarray, str]:
     return view.astype(dtype.newbyteorder('='), order='C', copy=True), msg.encoding
 
 
-def image_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
+MONO16_NARROW_FRACTION = 16
+"""mono16 pairs whose brightest value is under 1/this of the ``image.mono16_bits`` range are
+reported by :func:`mono16_range_warning`."""
+
+
+def mono16_to_gray(array: np.ndarray, bits: int = 16) -> np.ndarray:
+    """Scale a mono16 image with ``bits`` significant bits to 8 bits.
+
+    Keeps the top 8 of the ``bits`` low bits (``value >> (bits - 8)``); values above
+    ``2**bits - 1`` saturate at 255. ``bits`` 16 keeps the high byte, as cv_bridge does.
+
+    Args:
+        array: ``(H, W) uint16``.
+        bits: Significant bits of the sensor, 8 to 16 (``image.mono16_bits``).
+
+    Returns:
+        ``(H, W) uint8`` C-contiguous array.
+
+    Raises:
+        ValueError: If ``bits`` is not an integer in 8..16.
+
+    """
+    if isinstance(bits, bool) or not isinstance(bits, (int, np.integer)) or not 8 <= bits <= 16:
+        raise ValueError(f'mono16 bits must be an integer in 8..16, got {bits!r}')
+    shifted = array >> (int(bits) - 8)
+    if bits < 16:
+        cv2.min(shifted, 255, dst=shifted)   # in place; a third of np.minimum's time at 4K
+    return shifted.astype(np.uint8)
+
+
+def mono16_range_warning(grays: Any, bits: int) -> str:
+    """Say when mono16 images use far fewer bits than ``image.mono16_bits`` sets.
+
+    Args:
+        grays: The decoded ``(H, W) uint8`` images of a pair's mono16 messages
+            (:func:`mono16_to_gray` with ``bits``).
+        bits: The ``image.mono16_bits`` they were decoded with.
+
+    Returns:
+        One line naming ``image.mono16_bits`` and the bits the data seems to use when the
+        brightest grey of every image is under 256 / :data:`MONO16_NARROW_FRACTION` (16 grey
+        levels or fewer: 12-bit data read as 16 bits), else ''.
+
+    """
+    peak = max((int(gray.max()) for gray in grays), default=255)
+    if peak >= 256 // MONO16_NARROW_FRACTION:
+        return ''
+    used = max(8, bits - 8 + peak.bit_length())
+    return (f'mono16 images use under 1/{MONO16_NARROW_FRACTION} of the {bits}-bit range of '
+            f'image.mono16_bits (brightest grey {peak} of 255 after decoding): set '
+            f"image.mono16_bits to the sensor's significant bits ({used} fit the data)")
+
+
+def image_to_gray(msg: Any, copy: bool = True, mono16_bits: int = 16) -> np.ndarray:
     """Decode a raw ``sensor_msgs/Image`` to an 8-bit gray image.
 
     Colour encodings are converted with OpenCV's ITU-R BT.601 luma weights. mono16 is scaled
-    to 8 bits by keeping the high byte (``value >> 8``).
+    to 8 bits by :func:`mono16_to_gray` with ``mono16_bits`` (16: the high byte,
+    ``value >> 8``, as cv_bridge does).
 
     Args:
         msg: An object with the fields ``encoding``, ``height``, ``width``, ``step``,
@@ -230,6 +284,8 @@ def image_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
         copy: False: mono8 and 8UC1 without row padding come back as a read-only view of
             the message's data, and colour is converted from the data in place (see
             :func:`image_to_array`).
+        mono16_bits: Significant bits of mono16 data (``image.mono16_bits``), 8 to 16;
+            other encodings ignore it.
 
     Returns:
         ``(H, W) uint8`` C-contiguous array that shares no memory with the message (with
@@ -242,7 +298,7 @@ def image_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
     array, encoding = image_to_array(msg, copy)
     layout = _LAYOUTS[encoding]
     if layout.bytes_per_channel == 2:
-        return (array >> 8).astype(np.uint8)
+        return mono16_to_gray(array, mono16_bits)
     if layout.gray_conversion is None:
         return array
     return cv2.cvtColor(array, layout.gray_conversion)
@@ -290,7 +346,7 @@ def compressed_to_gray(msg: Any) -> np.ndarray:
     return np.ascontiguousarray(gray)
 
 
-def message_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
+def message_to_gray(msg: Any, copy: bool = True, mono16_bits: int = 16) -> np.ndarray:
     """Decode a raw or compressed image message to an 8-bit gray image.
 
     Args:
@@ -298,6 +354,7 @@ def message_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
             with a ``format`` attribute are treated as compressed.
         copy: False: a raw mono8 image may come back as a read-only view of the message's
             data (:func:`image_to_gray`).
+        mono16_bits: Significant bits of raw mono16 data (``image.mono16_bits``).
 
     Returns:
         ``(H, W) uint8`` C-contiguous array.
@@ -308,7 +365,12 @@ def message_to_gray(msg: Any, copy: bool = True) -> np.ndarray:
     """
     if hasattr(msg, 'format'):
         return compressed_to_gray(msg)
-    return image_to_gray(msg, copy)
+    return image_to_gray(msg, copy, mono16_bits)
+
+
+def is_mono16(msg: Any) -> bool:
+    """Return whether ``msg`` is a raw image message with encoding mono16."""
+    return getattr(msg, 'encoding', None) == 'mono16'
 
 
 def gray_to_image_fields(array: np.ndarray, encoding: str = 'mono8') -> dict[str, Any]:

@@ -12,9 +12,12 @@ whole prior search in one pair (:func:`~domplane_ros.config.one_shot_search`); t
 two folders are one stream (each warm-starts from the last, as live), ``--fps`` apart.
 
 For each pair it prints the left-to-right homography (3x3, ``H[2][2] == 1``), the lock state,
-the verification confidence and, without a plane, the reason. ``--out DIR`` writes
-``NAME_overlay.png`` (the left image with the mask tint, the corners and a legend) and
-``NAME_mask.png`` (mono8: 255 plane, 127 obstacle, 0 undecided, as ``plane/mask``) per pair.
+the verification confidence and, without a plane, the reason (the node's reason, whose hint
+for swapped cameras names the LEFT and RIGHT arguments instead of the image topics).
+``--out DIR`` writes ``NAME_overlay.png`` (the left image with the mask tint, the corners and
+a legend) and ``NAME_mask.png`` (mono8: 255 plane, 127 obstacle, 0 undecided, as
+``plane/mask``) per pair. 16-bit image files are scaled by ``image.mono16_bits`` (from
+``--params-file``) as the node scales mono16 messages.
 
 Exit codes: 0 when every pair gave a plane; 4 when every pair was processed but at least one
 gave none (the reason is printed); 3 when pairs of two folders could not be read and were
@@ -42,6 +45,7 @@ from domplane_ros.pair.files import image_pairs, ImagePair, PairInputError, read
 from domplane_ros.params_file import node_name_hint
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.stream.status import reason_for_arguments
 import numpy as np
 
 PROG = 'plane_pair'
@@ -134,11 +138,13 @@ def run_pairs(pairs: Sequence[ImagePair], config: PlaneNodeConfig, out: Path | N
     outcomes = []
     for index, pair in enumerate(pairs):
         try:
-            left, right = read_pair(pair)
+            left, right, image_warning = read_pair(pair, config.image.mono16_bits)
         except PairInputError as err:
             outcomes.append(PairOutcome(pair, None, str(err)))
             continue
         result = pipeline.process(left, right, _STAMP0_NS + index * period_ns)
+        if image_warning:
+            result = replace(result, warnings=(image_warning, *result.warnings))
         written: tuple[Path, ...] = ()
         if out is not None:
             written = _write_pictures(out, pair, left, result)
@@ -184,7 +190,7 @@ def _summary(result: FrameResult) -> str:
         return (f'plane found: state {result.state}, confidence {result.confidence:.2f}, '
                 f'{result.n_inliers} of {corners} left corners matched on the plane')
     return (f'no plane: state {result.state}, confidence {result.confidence:.2f}; '
-            f'{result.reason}')
+            f'{reason_for_arguments(result.reason)}')
 
 
 def format_outcome(outcome: PairOutcome) -> list[str]:

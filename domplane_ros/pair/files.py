@@ -1,6 +1,7 @@
 """Stereo pairs from image files: two files, or two folders paired by sorted name.
 
-No ROS: images are read with OpenCV as 8-bit grey (colour and 16-bit images are converted).
+No ROS: images are read with OpenCV as 8-bit grey (colour is converted; 16-bit grey or colour
+files are scaled by ``image.mono16_bits`` as mono16 messages are).
 """
 
 from __future__ import annotations
@@ -10,6 +11,7 @@ import os
 from pathlib import Path
 
 import cv2
+from domplane_ros.core.image import mono16_range_warning, mono16_to_gray
 from domplane_ros.errors import DomplaneError
 import numpy as np
 
@@ -87,8 +89,11 @@ def _images_in(folder: Path, side: str) -> list[Path]:
     return files
 
 
-def read_gray(path: Path, side: str) -> np.ndarray:
-    """Return an image file as (H, W) uint8 grey.
+def read_gray(path: Path, side: str, mono16_bits: int = 16) -> tuple[np.ndarray, bool]:
+    """Return an image file as (H, W) uint8 grey, and whether it held 16 bits.
+
+    A 16-bit file (a 12-bit sensor's PNG) is scaled by ``mono16_bits`` as the node scales
+    mono16 (:func:`~domplane_ros.core.image.mono16_to_gray`).
 
     Raises:
         PairInputError: If the file cannot be read or decoded as an image.
@@ -99,23 +104,38 @@ def read_gray(path: Path, side: str) -> np.ndarray:
     except OSError as err:
         raise PairInputError(f'cannot read {side} image {str(path)!r}: '
                              f'{err.strerror or err}') from err
-    image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE) if data.size else None
+    flags = cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH
+    image = cv2.imdecode(data, flags) if data.size else None
     if image is None or image.size == 0:
         raise PairInputError(f'{side} image {str(path)!r} is not an image OpenCV can decode')
-    return image
+    if image.dtype == np.uint16:
+        return mono16_to_gray(image, mono16_bits), True
+    if image.dtype != np.uint8:   # 32-bit float files (EXR, TIFF): OpenCV's 8-bit reading
+        image = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE)
+    return image, False
 
 
-def read_pair(pair: ImagePair) -> tuple[np.ndarray, np.ndarray]:
-    """Return the pair's (H, W) uint8 grey left and right images.
+def read_pair(pair: ImagePair, mono16_bits: int = 16) -> tuple[np.ndarray, np.ndarray, str]:
+    """Return the pair's (H, W) uint8 grey left and right images, and an image warning.
+
+    Args:
+        pair: The files.
+        mono16_bits: Significant bits of 16-bit files (``image.mono16_bits``).
+
+    Returns:
+        ``(left, right, warning)``; the warning says when 16-bit files use far fewer bits
+        than ``mono16_bits`` ('' if not, and for 8-bit files).
 
     Raises:
         PairInputError: If an image cannot be read, or the two differ in size.
 
     """
-    left, right = read_gray(pair.left, 'left'), read_gray(pair.right, 'right')
+    (left, left16), (right, right16) = (read_gray(pair.left, 'left', mono16_bits),
+                                        read_gray(pair.right, 'right', mono16_bits))
     if left.shape != right.shape:
         raise PairInputError(
             f'left {str(pair.left)!r} is {left.shape[1]}x{left.shape[0]} but right '
             f'{str(pair.right)!r} is {right.shape[1]}x{right.shape[0]}; the two cameras must '
             'give images of one size')
-    return left, right
+    wide = [gray for gray, sixteen in ((left, left16), (right, right16)) if sixteen]
+    return left, right, mono16_range_warning(wide, mono16_bits) if wide else ''

@@ -35,12 +35,14 @@ Exit codes: 0 on success; 3 when the output is complete except for messages the 
 not give (undecodable payloads: skipped, counted, named on stderr and recorded in the output's
 ``metadata.yaml`` ``custom_data``; ``--strict`` makes them fatal); 4 when the bag was read to
 the end but gave no pair to process (no messages on a topic, none paired, none decoded): the
-summary says "no pairs" and why, and nothing is written; 2 when the run is refused
-before anything is written (missing, unreadable or truncated bag, a folder without
-metadata.yaml, unknown topic, existing output without ``--force`` or, with it, one that is not
-a bag, an output inside the input bag's folder or in one that cannot be written, invalid params
-file); 1 when reading or writing fails part-way (a damaged bag,
-a full disk): the partial output is removed, or on a read failure with ``--keep-partial``
+summary says "no pairs" and why, and nothing is written; 5 when the output is complete and
+written but no processed pair gave a plane (one line on stderr with the last pair's reason;
+``plane_pair`` likewise exits non-zero, 4, for a pair without a plane; 3 takes precedence);
+2 when the run is refused before anything is written (missing, unreadable or truncated
+bag, a folder without metadata.yaml, unknown topic, existing output without ``--force`` or,
+with it, one that is not a bag, an output inside the input bag's folder or in one that
+cannot be written, invalid params file); 1 when reading or writing fails part-way (a damaged
+bag, a full disk): the partial output is removed, or on a read failure with ``--keep-partial``
 kept as ``OUTPUT_BAG.incomplete`` (``plane_replay.complete: 'false'`` in its metadata); 130 on
 Ctrl-C and 143 on SIGTERM, the partial output removed. Every error is one line on stderr.
 
@@ -81,6 +83,7 @@ EXIT_FAILED = 1
 EXIT_REFUSED = 2
 EXIT_SKIPPED = 3          # complete, but messages the bag could not give were skipped
 EXIT_NO_PAIRS = 4         # read to the end, but no pair to process: nothing written
+EXIT_NO_PLANE = 5         # complete and written, but no processed pair gave a plane
 EXIT_INTERRUPTED = 130    # Ctrl-C
 EXIT_TERMINATED = 143     # SIGTERM
 
@@ -193,6 +196,7 @@ class _Run:
         self.bar = _progress_bar(bag.counts['left'], progress)
         self.latencies_ms: list[float] = []
         self._noted = 0     # undecodable messages given to the session so far
+        self._image_warned = False
         self.summary.notes = list(bag.notes)
         if config.head.joint_states_topic:
             self.summary.notes.append(
@@ -278,6 +282,9 @@ class _Run:
                      on_frame: Callable[[ReplayedFrame], None] | None) -> None:
         self._write_diagnostics(self.clock.due(frame.pair.left_stamp_ns))
         self.output.write_frame(frame)
+        if frame.image_warning and not self._image_warned:
+            self._image_warned = True   # the text changes with the brightest grey: once
+            self._note(frame.image_warning)
         if self.table is not None:
             self.table.write(frame.result)
         self.latencies_ms.append(frame.latency_ms)
@@ -327,6 +334,9 @@ class _Run:
         summary.input_problems = {INPUT_COUNTER_NAMES[name]: count
                                   for name, count in session.counts.items() if count}
         summary.wall_s = wall_s
+        last = session.last_result
+        summary.last_reason = ((last.reason or 'no plane') if last is not None and not last.ok
+                               else session.last_error if last is None else '')
         summary.written = dict(self.output.counts)
         if counters.decode_errors or counters.undecodable_messages:
             summary.first_errors = (self.bag.undecodable[:3] + (
@@ -423,9 +433,9 @@ def main(argv: list[str] | None = None) -> int:
     Returns:
         0 on success; 3 when the output is complete except for messages the bag could not
         give (skipped, counted and named on stderr); 4 if the bag gave no pair (nothing
-        written); 2 if the run was refused (nothing written); 1 if it failed part-way (the
-        partial output removed); 130 on Ctrl-C and 143 on SIGTERM (the partial output
-        removed).
+        written); 5 if the output is complete but no processed pair gave a plane; 2 if the
+        run was refused (nothing written); 1 if it failed part-way (the partial output
+        removed); 130 on Ctrl-C and 143 on SIGTERM (the partial output removed).
 
     """
     parser = build_parser()
@@ -482,6 +492,11 @@ def main(argv: list[str] | None = None) -> int:
               f'{summary.first_errors[0]}); {summary.output_bag!r} records the count in '
               'metadata.yaml custom_data plane_replay.skipped_messages', file=sys.stderr)
         return EXIT_SKIPPED
+    if summary.processed and not summary.plane_found:
+        print(f'{PROG}: no plane: none of the {summary.processed} processed pairs gave a plane '
+              f'(last: {summary.last_reason or "no plane"}); the output was written',
+              file=sys.stderr)
+        return EXIT_NO_PLANE
     return EXIT_OK
 
 

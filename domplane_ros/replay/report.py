@@ -110,7 +110,9 @@ class ReplaySummary:
         no_pairs: Why the bag gave no pair to process ('' if it gave some); then nothing
             was written.
         notes: What the run did with the node's inputs beside the images (the prior from
-            ``camera_info.topic``, a topic it could not replay).
+            ``camera_info.topic``, a topic it could not replay, mono16 data far below
+            ``image.mono16_bits``).
+        last_reason: The last processed pair's reason for having no plane ('' if it had one).
 
     """
 
@@ -135,6 +137,7 @@ class ReplaySummary:
     input_problems: dict[str, int] = field(default_factory=dict)
     no_pairs: str = ''
     notes: list[str] = field(default_factory=list)
+    last_reason: str = ''
 
     @property
     def rate_pairs_per_s(self) -> float:

@@ -381,6 +381,8 @@ class PlaneNode(Node):
         result = frame.result
         for warning in result.warnings:
             self._warn_input(warning)
+        if frame.image_warning:
+            self._warn_input(frame.image_warning, key='mono16 range')
         header = frame.pair.left.header
         if frame.publishable:
             self._pub_h.publish(homography_msg(result.homography))
@@ -411,8 +413,10 @@ class PlaneNode(Node):
             if silent:
                 # The log said it once, at discovery; the status says it while it lasts.
                 wanted = 'reliable' if self.config.transport.reliable else 'best effort'
-                message += (f'; a publisher on {", ".join(silent)} offers QoS incompatible '
-                            f'with this {wanted} subscription: set qos.reliable to match it')
+                silence, sep, last_pairs = message.partition('; last pairs: ')
+                message = (f'{silence}; a publisher on {", ".join(silent)} offers QoS '
+                           f'incompatible with this {wanted} subscription: set qos.reliable '
+                           f'to match it{sep}{last_pairs}')
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in self.session.last_cameras)
         slop_s = self.config.sync.slop_s

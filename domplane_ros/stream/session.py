@@ -27,7 +27,7 @@ from typing import Any, Callable
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import PlaneEstimate
-from domplane_ros.core.image import message_to_gray
+from domplane_ros.core.image import is_mono16, message_to_gray, mono16_range_warning
 from domplane_ros.errors import clip_text, ImageDecodeError
 from domplane_ros.stream.health import homography_problem, InputCounts, StampChecks
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
@@ -79,6 +79,8 @@ class ProcessedPair:
         result: What the pipeline made of it.
         left: (H, W) uint8 decoded left image.
         latency_ms: Decoding plus processing time, milliseconds.
+        image_warning: A problem of the images that did not refuse the pair (mono16 data
+            using far fewer bits than ``image.mono16_bits``), '' if none.
 
     """
 
@@ -86,6 +88,7 @@ class ProcessedPair:
     result: FrameResult
     left: np.ndarray
     latency_ms: float
+    image_warning: str = ''
 
     @property
     def publishable(self) -> bool:
@@ -201,6 +204,8 @@ class StreamSession:
         self.last_cameras: list[tuple[str, int, float, float]] = []
         # An input problem since the last status that did not fail a pair ('' if none).
         self.input_warning = ''
+        # The last decoded pair's image warning (mono16 range), '' if none.
+        self.image_warning = ''
         # The pipeline and configuration (process, update_config); the stamp checks and the
         # synchroniser (receive, update_config).
         self._pipeline_lock = threading.Lock()
@@ -266,19 +271,22 @@ class StreamSession:
 
         """
         t0 = time.perf_counter()
+        bits = self.config.image.mono16_bits
         try:
             # Read-only, views of the messages' data where the encoding allows (no copy of
             # a 4K frame); the pair holds its messages, which nothing changes.
-            left = _read_only(message_to_gray(pair.left, copy=False))
-            right = _read_only(message_to_gray(pair.right, copy=False))
+            left = _read_only(message_to_gray(pair.left, copy=False, mono16_bits=bits))
+            right = _read_only(message_to_gray(pair.right, copy=False, mono16_bits=bits))
         except ImageDecodeError as err:
             self._decode_failed(err)
             return None
+        image_warning = self._image_warning(pair, (left, right), bits)
         with self._pipeline_lock:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,
                                            reset=pair.after_reset, joint_speed=joint_speed)
             state = self.pipeline.state
-        frame = ProcessedPair(pair, result, left, 1e3 * (time.perf_counter() - t0))
+        frame = ProcessedPair(pair, result, left, 1e3 * (time.perf_counter() - t0),
+                              image_warning)
         # Recorded before publishing, so a status built meanwhile (the diagnostics timer)
         # never shows the pipeline's new lock state beside no result.
         self.last_result = result
@@ -289,6 +297,16 @@ class StreamSession:
         self.latencies_ms.append(1e3 * (time.perf_counter() - t0))
         self.counters.processed += 1
         return frame
+
+    def _image_warning(self, pair: Pair, grays: tuple[np.ndarray, np.ndarray],
+                       bits: int) -> str:
+        """Check the range of a pair's mono16 images (mono8 and colour: two string tests)."""
+        mono16 = [gray for msg, gray in zip((pair.left, pair.right), grays) if is_mono16(msg)]
+        warning = mono16_range_warning(mono16, bits) if mono16 else ''
+        self.image_warning = warning
+        if warning:
+            self.input_warning = warning
+        return warning
 
     def _decode_failed(self, err: ImageDecodeError) -> None:
         self.counters.decode_errors += 1
@@ -360,7 +378,7 @@ class StreamSession:
             cameras=cameras, silence_s=self.config.transport.silence_s,
             joint_speed=joint_speed, implausible_joint_speed=implausible_joint_speed,
             implausible_joint_states=implausible_joint_states,
-            plane=self.config.verification.plane)
+            plane=self.config.verification.plane, image_warning=self.image_warning)
 
 
 def _read_only(image: np.ndarray) -> np.ndarray:

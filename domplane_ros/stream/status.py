@@ -30,8 +30,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
                  input_warning: str = '', cameras: Sequence[tuple[str, int, float, float]] = (),
                  silence_s: float = math.inf, joint_speed: float | None = None,
                  implausible_joint_speed: float | None = None,
-                 implausible_joint_states: int | None = None, plane: str = 'ground'
-                 ) -> tuple[int, str, list[tuple[str, str]]]:
+                 implausible_joint_states: int | None = None, plane: str = 'ground',
+                 image_warning: str = '') -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
     Args:
@@ -62,11 +62,15 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
             joint input (then the key ``joint states implausible`` is left out, as the
             replay, which has no joint input, leaves it out).
         plane: ``verification.plane``; shown as ``plane sought``, with what ``any`` turns off.
+        image_warning: The last pair's image warning (mono16 data far below
+            ``image.mono16_bits``), shown as ``image warning`` ('none' if '').
 
     Returns:
         ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
         pair had no plane, or an input warning) or 2 ERROR (``FAILURES_FOR_ERROR`` pairs in a
-        row without a plane); a one-line message; key/value pairs as strings.
+        row without a plane, also while the cameras are silent after them); a one-line
+        message; key/value pairs as strings. Silence or no input after pairs without a plane
+        says both: ``no images on ... for 3.0 s; last pairs: no plane for 3 pairs: ...``.
 
     """
     level, message = _level_and_message(rate, consecutive_failures, last_result,
@@ -90,6 +94,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
           if implausible_joint_states is not None else []),
         ('re-initialisations', reinitialisations),
         ('last error', last_error or 'none'),
+        ('image warning', image_warning or 'none'),
     ]
     values += input_diagnostic_values(*input_counts) + _camera_values(cameras)
     return level, message, [(key, str(value)) for key, value in values]
@@ -134,12 +139,29 @@ def _failure_reason(result: Any, last_error: str) -> str:
 def _level_and_message(rate: float, consecutive_failures: int, result: Any, reason: str,
                        lock_state: str, cameras: Sequence[tuple[str, int, float, float]],
                        silence_s: float) -> tuple[int, str]:
+    """Return the status's level and message: no input first, with the last pairs' state.
+
+    Silence (or no pairs) after pairs without a plane keeps the worse level and both
+    reasons: the cameras stopping does not hide that the last pairs had no plane.
+    """
     silent = [(topic, age) for topic, _, _, age in cameras if age > silence_s]
+    no_input = ''
     if silent:
-        return WARN, 'no images on ' + ', '.join(
+        no_input = 'no images on ' + ', '.join(
             f'{topic} for {format_number(age, 1)} s' for topic, age in silent)
-    if rate == 0.0:
-        return WARN, 'no stereo pairs received'
+    elif rate == 0.0:
+        no_input = 'no stereo pairs received'
+    level, message = _plane_level_and_message(consecutive_failures, result, reason, lock_state)
+    if not no_input:
+        return level, message
+    if level == OK:
+        return WARN, no_input
+    return max(level, WARN), f'{no_input}; last pairs: {message}'
+
+
+def _plane_level_and_message(consecutive_failures: int, result: Any, reason: str,
+                             lock_state: str) -> tuple[int, str]:
+    """Return the level and message of the last pairs' plane state."""
     if consecutive_failures >= FAILURES_FOR_ERROR:
         return ERROR, f'no plane for {consecutive_failures} pairs: {reason}'
     if consecutive_failures > 0 or (result is not None and not result.ok):
@@ -178,6 +200,21 @@ def _result_values(result: Any, joint_speed: float | None,
         ('final energy', f'{result.estimate.final_energy:.4g}' if energy else 'n/a'),
         ('converged', bool(ok and result.estimate.converged)),
     ]
+
+
+# The reason's hint for swapped cameras names the node's and the replay's inputs, the image
+# topics (stream/trust.py); plane_pair's inputs are its LEFT and RIGHT arguments.
+SWAP_HINT_TOPICS = 'swap the image topics'
+SWAP_HINT_ARGUMENTS = 'swap the LEFT and RIGHT arguments'
+
+
+def reason_for_arguments(reason: str) -> str:
+    """Return a reason as plane_pair prints it: the swap hint names its arguments, not topics.
+
+    The reason itself (CSV, ``plane/result``, ``/diagnostics``) is the same for every tool;
+    only the hint at its end changes.
+    """
+    return reason.replace(SWAP_HINT_TOPICS, SWAP_HINT_ARGUMENTS)
 
 
 RESULT_STATUS_NAME = 'plane'
