@@ -94,53 +94,6 @@ def period_vectors(image: np.ndarray, mask: np.ndarray, count: int = 2) -> np.nd
     return np.array(out).reshape(-1, 2)
 
 
-def move_in_periods(image: np.ndarray, mask: np.ndarray, move_px: np.ndarray,
-                    bands: int = 8, min_pixels: int = 256) -> float:
-    """Return the largest share of the texture's repeat period that a move covers, by band.
-
-    A plane moved by a sizeable share of its texture's period may have left the true plane for
-    a look-alike one period off, however well it then verifies. On a floor seen in perspective
-    both the period and a plane's move grow towards the bottom of the image, so they are
-    compared band by band: the image's rows are cut into ``bands`` equal bands, and in each
-    band with at least ``min_pixels`` of the mask the median move over the mask is divided by
-    the length of the shortest :func:`period_vectors` of the image over the band's mask.
-    A band whose texture does not repeat (a random texture: no period) sets no bound.
-
-    Args:
-        image: (H, W) grey image (any real dtype).
-        mask: (H, W) bool pixels where the move matters (a plane's support).
-        move_px: (H, W) float length of the move at each pixel (read on the mask only).
-        bands: Bands of rows.
-        min_pixels: Fewest mask pixels for a band to be measured.
-
-    Returns:
-        The largest ratio over the bands measured (0.0 when none repeats).
-
-    Raises:
-        ValueError: If the image is not 2-D or the mask's or the move's shape differs.
-
-    """
-    image = np.asarray(image)
-    mask = np.asarray(mask, bool)
-    move_px = np.asarray(move_px, np.float64)
-    if image.ndim != 2 or mask.shape != image.shape or move_px.shape != image.shape:
-        raise ValueError(f'need a 2-D image and a mask and a move of its shape, got '
-                         f'{image.shape}, {mask.shape} and {move_px.shape}')
-    worst = 0.0
-    edges = np.linspace(0, image.shape[0], bands + 1).round().astype(int)
-    for top, bottom in zip(edges[:-1], edges[1:]):
-        band = np.zeros_like(mask)
-        band[top:bottom] = mask[top:bottom]
-        if np.count_nonzero(band) < min_pixels:
-            continue
-        vectors = period_vectors(image, band)
-        if not len(vectors):
-            continue
-        period = float(np.hypot(vectors[:, 0], vectors[:, 1]).min())
-        worst = max(worst, float(np.median(move_px[band])) / period)
-    return worst
-
-
 def _autocorrelation(values: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Return the (unshifted) circular autocorrelation of ``values`` zero-padded to ``shape``."""
     spectrum = np.fft.rfft2(values, s=shape)

@@ -10,18 +10,14 @@ coarse alignment's few starts keep the configured tolerance (:meth:`CandidateWor
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import Iterable, Sequence
+from typing import Iterable
 
-import cv2
 from domplane_ros.config import EstimatorConfig, PlaneNodeConfig
 from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import Features
-from domplane_ros.core.homography import (apply_homography, check_homography, corner_distance_px,
-                                          normalise_scale)
-from domplane_ros.core.periodic import move_in_periods
+from domplane_ros.core.homography import check_homography, corner_distance_px, normalise_scale
 from domplane_ros.core.prior import PriorSearch
 from domplane_ros.core.result import PlaneEstimate
-from domplane_ros.core.verification import agreement_maps, VerificationConfig
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.challenge import distinct_starts, NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
@@ -68,21 +64,6 @@ PHOTOMETRIC_FINISH_ROUNDS = 2
 # A refinement that moved the corners' predictions by less than this (median, pixels) has
 # settled: no second round (each costs a dense flow, about 100 ms CPU at 640 x 480).
 PHOTOMETRIC_SETTLED_PX = 0.3
-# A near miss's rescue (CandidateWork.rescued) is measured where it matters: on the floor the
-# rescued plane explains (its support in the left image), as the move |H_rescued(x) -
-# H_start(x)| of each support pixel. Band by band of rows (the period and the move both grow
-# toward the near rows), the median move may be at most RESCUE_MAX_PERIOD_SHARE of the floor's
-# own repeat period there (core/periodic.py move_in_periods): at half a period the nearest
-# alignment of the pattern is the next one, a look-alike. Measured on 8 cm planks (seed 506,
-# ``both``): a near miss 18.7 px off refined to a verified look-alike 8.5 px off moved 16 px
-# of a 48 px period and 25 px of a 36 px one near the bottom (share 0.71); the rescues that
-# landed on faint 1.28 m tiles, 0.07-0.56. A band whose texture does not repeat sets no bound
-# but RESCUE_MAX_MOVE_PX (median over the whole support; the correct rescues of the faint
-# tiles moved 1.1-4.7 px, one that walked 42 px -> 4.9 px off and verified 10.1 px).
-# None: the features' median move is held to the polish's TIGHT_POLISH_MAX_MOVE_PX instead
-# (main before session 13, whose median runs mostly over features off the floor).
-RESCUE_MAX_PERIOD_SHARE: float | None = 0.5
-RESCUE_MAX_MOVE_PX = 8.0
 
 # A pair whose corners are too few to fix a plane (fewer than ``estimator.min_inliers``: a
 # large checker seen close up shows about ten) gets its planes from the photometric refinement
@@ -244,22 +225,22 @@ class CandidateWork:
         """Refine a near miss photometrically while that raises its score; return the last.
 
         A near miss: a plane refused only for explaining too little of the image, whose score
-        is close to ``verification.min_score``, or for too little of its bottom (the search
-        decides which, see :data:`~domplane_ros.stream.search.NEAR_MISS_RATIO`). A plane a
-        pixel off the floor scores a tenth less than the floor itself (tuning rough rigs 12
-        and 47: 1.0 px off, 0.23 against the truth's 0.26-0.27). Up to
-        :data:`PHOTOMETRIC_FINISH_ROUNDS` rounds at the finishing width, stopping at the first
-        verified plane or a round that does not raise the score or that moved the plane too
-        far (:meth:`_rescue_too_far`): the rescue is for a plane a few pixels off, not for one
-        a tile or plank period away. The caller picks among the results as usual
-        (uniqueness, rivals).
+        is close to ``verification.min_score`` (the search decides which, see
+        :data:`~domplane_ros.stream.search.NEAR_MISS_RATIO`). A plane a pixel off the floor
+        scores a tenth less than the floor itself (tuning rough rigs 12 and 47: 1.0 px off,
+        0.23 against the truth's 0.26-0.27). Up to :data:`PHOTOMETRIC_FINISH_ROUNDS` rounds at
+        the finishing width, stopping at the first verified plane or a round that does not
+        raise the score or that would put the features' predictions more than
+        :data:`TIGHT_POLISH_MAX_MOVE_PX` (median) from the near miss's own: the rescue is for a
+        plane a pixel off, not for one a tile period away. The caller picks among the results
+        as usual (uniqueness, rivals).
         """
         start = estimate.homography
         for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
             refined = self.trust.refined(step.left, step.right, estimate.homography,
                                          finish=True)
             if (refined is None or check_homography(refined)
-                    or self._rescue_too_far(step, problem, start, refined)):
+                    or _median_move(problem, start, refined) > TIGHT_POLISH_MAX_MOVE_PX):
                 break
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
             if again.verification.score <= verdict.verification.score:
@@ -268,27 +249,6 @@ class CandidateWork:
             if verdict.accepted:
                 break
         return estimate, verdict
-
-    def _rescue_too_far(self, step: PairStep, problem: TwoStep, start: np.ndarray,
-                        refined: np.ndarray) -> bool:
-        """Return whether a rescue's refinement moved the near miss too far to be trusted.
-
-        Over the refined plane's support in the left image: a median move over
-        :data:`RESCUE_MAX_MOVE_PX`, or in a band of rows a median move over
-        :data:`RESCUE_MAX_PERIOD_SHARE` of the texture's repeat period there; an empty
-        support too. With the share None, the features' median move over
-        :data:`TIGHT_POLISH_MAX_MOVE_PX`.
-        """
-        if RESCUE_MAX_PERIOD_SHARE is None:
-            return _median_move(problem, start, refined) > TIGHT_POLISH_MAX_MOVE_PX
-        move, support = _support_move(step.left, step.right, start, refined,
-                                      self.trust.config(step.left.shape[1]),
-                                      self.config.features.roi)
-        if not support.any():
-            return True
-        if float(np.median(move[support])) > RESCUE_MAX_MOVE_PX:
-            return True
-        return move_in_periods(step.left, support, move) > RESCUE_MAX_PERIOD_SHARE
 
     def _moved(self, problem: TwoStep, estimate: PlaneEstimate, homography: np.ndarray
                ) -> PlaneEstimate:
@@ -340,26 +300,6 @@ def _median_move(problem: TwoStep, first: np.ndarray, second: np.ndarray) -> flo
     """Return the median distance between two planes' predictions of the features, pixels."""
     return float(np.median(np.linalg.norm(problem.apply(second) - problem.apply(first),
                                           axis=1)))
-
-
-def _support_move(left: np.ndarray, right: np.ndarray, start: np.ndarray, moved: np.ndarray,
-                  config: VerificationConfig, roi: Sequence[float] | None
-                  ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the move and the moved plane's support, both (H, W) over the left image.
-
-    The move: |moved(x) - start(x)| in pixels on the support (0 elsewhere); the support: the
-    verification's (``config``, ``roi``) at the working width, scaled up to the image.
-    """
-    maps = agreement_maps(left, right, moved, config, roi, peak=False)
-    height, width = left.shape
-    support = cv2.resize(maps.support.astype(np.uint8), (width, height),
-                         interpolation=cv2.INTER_NEAREST) > 0
-    ys, xs = np.nonzero(support)
-    points = np.stack([xs, ys], axis=1).astype(np.float64)
-    move = np.zeros((height, width))
-    move[ys, xs] = np.linalg.norm(apply_homography(moved, points)
-                                  - apply_homography(start, points), axis=1)
-    return move, support
 
 
 def photometric_estimate(homography: np.ndarray) -> PlaneEstimate:

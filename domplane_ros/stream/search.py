@@ -30,8 +30,7 @@ from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.swap import swap_rivals
-from domplane_ros.stream.trust import (MAX_BELOW_FRACTION, MIN_BOTTOM_SCORE, MIN_BOTTOM_SHARE,
-                                       MIN_GROUND_SLOPE, TrustGate)
+from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import Verdict
 import numpy as np
 
@@ -70,18 +69,9 @@ DOUBT_SLOPE = 0.05
 # A search in doubt that still has no verified plane refines its near misses photometrically
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
 # little of the image, with at least NEAR_MISS_RATIO x verification.min_score. Measured: docs/
-# BENCHMARKS.md, trust round 8. 0.6 (was 0.8): with the default min_score 0.25 that is 0.15,
-# where the confidence is 0; on faint 1.28 m tiles a plane 3 px off the floor explains 0.18
-# where the floor explains 0.29 (seeds 35 and 203 with ``both``), and its rescue lands on the
-# floor. Safe only with the rescue's move measured against the floor's period
-# (CandidateWork.rescued); measured: docs/BENCHMARKS.md, round 14 of the faint floors.
-NEAR_MISS_RATIO = 0.6
+# BENCHMARKS.md, trust round 8.
+NEAR_MISS_RATIO = 0.8
 NEAR_MISSES = 2
-# ... and, with NEAR_MISS_BOTTOM, the verified planes of a ground slope refused only for
-# explaining too little of the image's bottom (``not the ground``): a fit of the far floor
-# whose error grows toward the near rows (faint 1.28 m tiles with ``both``: seed 215's 3.9 px
-# plane, 0 % of the bottom, lands 0.06 px from the floor; seed 122's creeps and stays refused).
-NEAR_MISS_BOTTOM = True
 
 __all__ = ['PlaneSearch', 'propagate']
 
@@ -285,9 +275,7 @@ class PlaneSearch:
         """Add the near misses of the pool, refined photometrically; return whether any.
 
         Near misses: ground planes of the right sign refused only for explaining too little of
-        the image, with at least :data:`NEAR_MISS_RATIO` of ``verification.min_score``, and
-        with :data:`NEAR_MISS_BOTTOM` verified planes of a ground slope refused only for too
-        little of the image's bottom; the best
+        the image, with at least :data:`NEAR_MISS_RATIO` of ``verification.min_score``; the best
         :data:`NEAR_MISSES` distinct ones by score (:meth:`CandidateWork.rescued`). A rescued
         plane joins the pool only if verified and it passes the checks every pool plane passed
         (a valid homography, inliers spread over the region): its features were matched again.
@@ -300,10 +288,9 @@ class PlaneSearch:
         # miss whatever its verification says: the refinement moves it a pixel or two, not to
         # a slope of the other sign, and would take a ground plane's slot.
         misses = sorted(((v, plane) for v, plane in judged
-                         if (v.ground and not v.swapped
-                             and v.verification.reason == REASON_LOW_SUPPORT
-                             and v.verification.score >= least)
-                         or (NEAR_MISS_BOTTOM and _misses_the_bottom(v, plane, size))),
+                         if v.ground and not v.swapped
+                         and v.verification.reason == REASON_LOW_SUPPORT
+                         and v.verification.score >= least),
                         key=lambda item: -item[0].verification.score)
         work, added, tried = self._work(), False, []
         for verdict, plane in misses:
@@ -441,16 +428,3 @@ class PlaneSearch:
         else:
             step.reason = 'prior search found no plane'
         self._search = None
-
-
-def _misses_the_bottom(verdict: Verdict, plane: PlaneEstimate, size: tuple[int, int]) -> bool:
-    """Return whether a plane was refused only for explaining too little of the image bottom.
-
-    Verified over the image, of a ground plane's disparity slope, nothing beyond it, but under
-    the gate's least bottom score (:meth:`~domplane_ros.stream.trust.TrustGate.judge`).
-    """
-    check = verdict.verification
-    return (check.accepted and not verdict.ground and not verdict.swapped
-            and check.below_fraction <= MAX_BELOW_FRACTION
-            and check.bottom_score < max(MIN_BOTTOM_SCORE, MIN_BOTTOM_SHARE * check.score)
-            and swap_evidence(plane.homography, *size).disparity_slope >= MIN_GROUND_SLOPE)

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import cv2
-from domplane_ros.core.periodic import move_in_periods, period_vectors
+from domplane_ros.core.periodic import period_vectors
 import numpy as np
 import pytest
 
@@ -44,35 +44,3 @@ def test_blobby_texture_and_empty_mask_have_no_period():
     assert period_vectors(noise, np.zeros(noise.shape, bool)).shape == (0, 2)
     with pytest.raises(ValueError, match='mask of its shape'):
         period_vectors(noise, np.ones((10, 10), bool))
-
-
-def _planks(repeat: int, rows: int, angle_deg: float = 20.0, width: int = 640) -> np.ndarray:
-    ys, xs = np.mgrid[0:rows, 0:width].astype(np.float64)
-    a = np.radians(angle_deg)
-    light = np.floor(2 * (np.cos(a) * xs + np.sin(a) * ys) / repeat) % 2
-    return cv2.GaussianBlur((light * 160 + 40).astype(np.float32), (0, 0), 0.7)
-
-
-def test_a_move_is_measured_against_the_period_of_its_own_band():
-    # A plank floor in perspective, 640 x 480: planks repeating every 16 px in the top half,
-    # every 48 px in the bottom half. An 8 px move is half a fine period but a sixth of a
-    # coarse one: the share is the larger, the fine half's.
-    image = np.vstack([_planks(16, 240), _planks(48, 240)])
-    mask = np.ones(image.shape, bool)
-    move = np.full(image.shape, 8.0)
-    assert move_in_periods(image, mask, move) == pytest.approx(8 / 16, abs=0.03)
-    # Moved only where the planks are wide, the share is the wide planks'.
-    move[:240] = 0.0
-    assert move_in_periods(image, mask, move) == pytest.approx(8 / 48, abs=0.02)
-    # Where the mask leaves a band too few pixels, the band is not measured.
-    mask[240:] = False
-    assert move_in_periods(image, mask, move) == 0.0
-
-
-def test_a_texture_that_does_not_repeat_sets_no_bound_on_a_move():
-    rng = np.random.default_rng(3)
-    noise = cv2.GaussianBlur(rng.standard_normal((480, 640)).astype(np.float32), (0, 0), 2.0)
-    mask = np.ones(noise.shape, bool)
-    assert move_in_periods(noise, mask, np.full(noise.shape, 20.0)) == 0.0
-    with pytest.raises(ValueError, match='a move of its shape'):
-        move_in_periods(noise, mask, np.zeros((10, 10)))
