@@ -65,15 +65,6 @@ DOUBT_CONFIDENCE = 0.75
 # its run) published a plane 104 px off at slope 0.025 and confidence 1.0, the floor (slope
 # 0.20, score 0.63) never a candidate; the further shifts find it.
 DOUBT_SLOPE = 0.05
-# Every search is in doubt once it has a winner (the switch; off, the rules above decide):
-# tuning floors_rough seed 150 (a 16 cm checker, rough rig) published a look-alike 84 px off
-# at uniqueness 6.9 and confidence 1.0, the truth (score 0.65) never judged, no rule above in
-# doubt (the checker's period, shrinking with distance, is not found over the plane's
-# support); the further shifts find the truth (0.06 px) and the pick is ambiguous: refused
-# instead of wrong. Measured (session 13, evaluate_trust --no-orb, tuning seeds 0-29 and
-# 150-179, against the rules alone): that wrong plane gone, rough 0-29 one correct plane fewer
-# (30 -> 29; the pair published 1-5 px off), every other count the same.
-ALWAYS_DOUBT = True
 
 # A search in doubt that still has no verified plane refines its near misses photometrically
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
@@ -244,7 +235,7 @@ class PlaneSearch:
         further shifts find the truth beside it, within 1.2 x: refused as ambiguous), or whose
         verification confidence is below :data:`DOUBT_CONFIDENCE`, or whose ``homography``
         (the winner's, on an image of ``size`` = (width, height)) has a disparity slope under
-        :data:`DOUBT_SLOPE`; with :data:`ALWAYS_DOUBT` every search with a winner.
+        :data:`DOUBT_SLOPE`.
         """
         if search.peaks_tried:
             return False
@@ -253,8 +244,7 @@ class PlaneSearch:
         shallow = homography is not None and swap_evidence(
             homography, *size).disparity_slope < DOUBT_SLOPE
         return (verdict.uniqueness < DOUBT_UNIQUENESS or not verdict.contested
-                or verdict.verification.confidence < DOUBT_CONFIDENCE or shallow
-                or ALWAYS_DOUBT)
+                or verdict.verification.confidence < DOUBT_CONFIDENCE or shallow)
 
     def _sibling_pick(self, step: PairStep, search: _Search, pool: list[PlaneEstimate],
                       best: PlaneEstimate,
