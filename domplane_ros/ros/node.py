@@ -17,7 +17,7 @@ from __future__ import annotations
 import sys
 import threading
 import time
-from typing import Any
+from typing import Any, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
@@ -260,6 +260,19 @@ class PlaneNode(Node):
         for pair in pairs:
             self.slot.put(pair)
 
+    def _incompatible_qos_hint(self, silent_topics: Sequence[str]) -> str:
+        """Say which silent topics had a publisher of incompatible QoS ('' if none).
+
+        The log said it once, at discovery; the status says it while the silence lasts.
+        """
+        topics = [self.session.activity.topics[side] for side in SIDES if side in self._qos_warned
+                  and self.session.activity.topics[side] in silent_topics]
+        if not topics:
+            return ''
+        wanted = 'reliable' if self.config.transport.reliable else 'best effort'
+        return (f'a publisher on {", ".join(topics)} offers QoS incompatible with this '
+                f'{wanted} subscription: set qos.reliable to match it')
+
     def _on_serialised_image(self, side: str, raw: bytes) -> None:
         """Take one serialised image: read its fields in place, then as :meth:`on_image`."""
         try:
@@ -405,18 +418,9 @@ class PlaneNode(Node):
             implausible_joint_speed=self.implausible_joint_speed(),
             # Counted only with a joint topic: without one the keys stay the replay's.
             implausible_joint_states=(self.implausible_joint_states
-                                      if self._joint_sub is not None else None))
+                                      if self._joint_sub is not None else None),
+            silence_hint=self._incompatible_qos_hint)
         if message.startswith('no images on '):
-            silent = [self.session.activity.topics[side] for side in SIDES
-                      if side in self._qos_warned
-                      and self.session.activity.topics[side] in message]
-            if silent:
-                # The log said it once, at discovery; the status says it while it lasts.
-                wanted = 'reliable' if self.config.transport.reliable else 'best effort'
-                silence, sep, last_pairs = message.partition('; last pairs: ')
-                message = (f'{silence}; a publisher on {", ".join(silent)} offers QoS '
-                           f'incompatible with this {wanted} subscription: set qos.reliable '
-                           f'to match it{sep}{last_pairs}')
             self.get_logger().warning(message, throttle_duration_sec=_THROTTLE_S)
         fastest = max(camera[2] for camera in self.session.last_cameras)
         slop_s = self.config.sync.slop_s

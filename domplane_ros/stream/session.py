@@ -23,7 +23,7 @@ from collections import deque
 from dataclasses import dataclass
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import PlaneEstimate
@@ -343,7 +343,8 @@ class StreamSession:
 
     def status(self, now: float, rate: float | None = None, dropped_busy: int = 0,
                joint_speed: float | None = None, implausible_joint_speed: float | None = None,
-               implausible_joint_states: int | None = None
+               implausible_joint_states: int | None = None,
+               silence_hint: Callable[[Sequence[str]], str] | None = None
                ) -> tuple[int, str, list[tuple[str, str]]]:
         """Return the ``/diagnostics`` status and start a new period.
 
@@ -356,6 +357,8 @@ class StreamSession:
             implausible_joint_speed: A recent implausible joint speed (rad/s), or None.
             implausible_joint_states: Joint states flagged implausible so far (None: no
                 joint input, no key).
+            silence_hint: Why the given silent cameras' topics may be silent ('' if not
+                known), said after the silence (:func:`plane_status`).
 
         Returns:
             ``(level, message, values)``, see :func:`plane_status`.
@@ -378,7 +381,8 @@ class StreamSession:
             cameras=cameras, silence_s=self.config.transport.silence_s,
             joint_speed=joint_speed, implausible_joint_speed=implausible_joint_speed,
             implausible_joint_states=implausible_joint_states,
-            plane=self.config.verification.plane, image_warning=self.image_warning)
+            plane=self.config.verification.plane, image_warning=self.image_warning,
+            silence_hint=silence_hint)
 
 
 def _read_only(image: np.ndarray) -> np.ndarray:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.health import input_diagnostic_values
@@ -31,7 +31,9 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
                  silence_s: float = math.inf, joint_speed: float | None = None,
                  implausible_joint_speed: float | None = None,
                  implausible_joint_states: int | None = None, plane: str = 'ground',
-                 image_warning: str = '') -> tuple[int, str, list[tuple[str, str]]]:
+                 image_warning: str = '',
+                 silence_hint: Callable[[Sequence[str]], str] | None = None
+                 ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
     Args:
@@ -64,6 +66,9 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         plane: ``verification.plane``; shown as ``plane sought``, with what ``any`` turns off.
         image_warning: The last pair's image warning (mono16 data far below
             ``image.mono16_bits``), shown as ``image warning`` ('none' if '').
+        silence_hint: Given the silent cameras' topics, why they may be silent ('' if the
+            adapter knows nothing; the node: a publisher with incompatible QoS), said after
+            the silence.
 
     Returns:
         ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
@@ -75,7 +80,7 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
     """
     level, message = _level_and_message(rate, consecutive_failures, last_result,
                                         _failure_reason(last_result, last_error), lock_state,
-                                        cameras, silence_s)
+                                        cameras, silence_s, silence_hint)
     if input_warning:
         level = max(level, WARN)
         message += f'; {input_warning}'
@@ -138,7 +143,9 @@ def _failure_reason(result: Any, last_error: str) -> str:
 
 def _level_and_message(rate: float, consecutive_failures: int, result: Any, reason: str,
                        lock_state: str, cameras: Sequence[tuple[str, int, float, float]],
-                       silence_s: float) -> tuple[int, str]:
+                       silence_s: float,
+                       silence_hint: Callable[[Sequence[str]], str] | None = None
+                       ) -> tuple[int, str]:
     """Return the status's level and message: no input first, with the last pairs' state.
 
     Silence (or no pairs) after pairs without a plane keeps the worse level and both
@@ -149,6 +156,9 @@ def _level_and_message(rate: float, consecutive_failures: int, result: Any, reas
     if silent:
         no_input = 'no images on ' + ', '.join(
             f'{topic} for {format_number(age, 1)} s' for topic, age in silent)
+        hint = silence_hint([topic for topic, _ in silent]) if silence_hint else ''
+        if hint:
+            no_input += '; ' + hint
     elif rate == 0.0:
         no_input = 'no stereo pairs received'
     level, message = _plane_level_and_message(consecutive_failures, result, reason, lock_state)
