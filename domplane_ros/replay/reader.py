@@ -18,7 +18,7 @@ from typing import Any, Iterable, Iterator, NamedTuple
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.image import message_to_gray
 from domplane_ros.errors import BagError, clip_text, ConfigError, ImageDecodeError
-from domplane_ros.ros.camera_info import camera_model
+from domplane_ros.ros.camera_info import camera_model, CameraInfoTracker
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 from domplane_ros.stream.session import DEFAULT_TOPICS, ProcessedPair, StreamSession
 from domplane_ros.stream.sync import ApproximateTimeSync, Pair, Side
@@ -148,7 +148,7 @@ class ReplaySession(StreamSession):
                  topics: tuple[str, str] = DEFAULT_TOPICS) -> None:
         """Make a fresh session whose clock starts at the first message's stamp."""
         super().__init__(config, topics, start=None, tick_s=1e-9)
-        self._camera_model: tuple[float, ...] | None = None   # the K applied to the prior
+        self._camera_info = CameraInfoTracker()
 
     def apply_camera_info(self, msg: Any) -> str:
         """Narrow the prior from the left camera's K, as plane_node does (once per distinct K).
@@ -167,21 +167,17 @@ class ReplaySession(StreamSession):
             model = camera_model(msg)
         except ValueError as err:
             return f'{err}; ignored, the prior stays as configured'
-        key = (model.focal_px, *model.principal_px)
-        if self._camera_model is not None and np.allclose(key, self._camera_model, rtol=1e-6):
-            return ''
-        self._camera_model = key
         tolerance = self.config.transport.camera_info_focal_tolerance
-        low, high = model.prior_values(tolerance)['prior.focal_px']
+        values = self._camera_info.new_values(model, tolerance)
+        if values is None:
+            return ''
         try:
-            prior = replace(self.config.prior, focal_px=(low, high),
-                            principal_point_px=tuple(model.principal_px))
+            prior = replace(self.config.prior, focal_px=tuple(values['prior.focal_px']),
+                            principal_point_px=tuple(values['prior.principal_point_px']))
         except ConfigError as err:
             return f'camera_info not applied to the prior: {err}'
         self.update_config(replace(self.config, prior=prior))
-        return (f'prior from camera_info: focal_px [{low:.1f}, {high:.1f}] (f '
-                f'{model.focal_px:.1f} +-{100 * tolerance:g} %), principal point '
-                f'({model.principal_px[0]:.1f}, {model.principal_px[1]:.1f})')
+        return self._camera_info.describe(model, values, tolerance)
 
     def add(self, side: Side, msg: Any) -> list[ReplayedFrame]:
         """Add one image message and process the pairs it completes.

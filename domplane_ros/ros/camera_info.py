@@ -10,6 +10,8 @@ from dataclasses import dataclass
 import math
 from typing import Any
 
+import numpy as np
+
 _MAX_ASPECT_MISMATCH = 0.05  # relative fx/fy difference above which K is not square pixels
 
 
@@ -84,3 +86,33 @@ def camera_model(msg: Any) -> CameraModel:
         raise ValueError(f'camera_info principal point ({cx:g}, {cy:g}) is outside the '
                          f'{width:g}x{height:g} image')
     return CameraModel(0.5 * (fx + fy), (cx, cy), mismatch)
+
+
+class CameraInfoTracker:
+    """The K last applied to the prior: each distinct K is applied once (node and replay)."""
+
+    def __init__(self) -> None:
+        """Start with no K applied."""
+        self._applied: tuple[float, ...] | None = None
+
+    def new_values(self, model: CameraModel, focal_tolerance: float
+                   ) -> dict[str, list[float]] | None:
+        """Return ``model``'s prior values if its K differs from the last applied, else None.
+
+        ``focal_tolerance``: ``camera_info.focal_tolerance`` (:meth:`CameraModel.prior_values`).
+        The K counts as applied once returned (the caller applies it or reports why not).
+        """
+        key = (model.focal_px, *model.principal_px)
+        if self._applied is not None and np.allclose(key, self._applied, rtol=1e-6):
+            return None
+        self._applied = key
+        return model.prior_values(focal_tolerance)
+
+    @staticmethod
+    def describe(model: CameraModel, values: dict[str, list[float]],
+                 focal_tolerance: float) -> str:
+        """Return the one line saying what the prior became."""
+        low, high = values['prior.focal_px']
+        return (f'prior from camera_info: focal_px [{low:.1f}, {high:.1f}] (f '
+                f'{model.focal_px:.1f} +-{100 * focal_tolerance:g} %), principal point '
+                f'({model.principal_px[0]:.1f}, {model.principal_px[1]:.1f})')

@@ -23,7 +23,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
                                  PlaneNodeConfig, unknown_parameter_message)
 from domplane_ros.errors import wire_repr
-from domplane_ros.ros.camera_info import camera_model
+from domplane_ros.ros.camera_info import camera_model, CameraInfoTracker
 from domplane_ros.ros.handover import NewestSlot
 from domplane_ros.ros.messages import descriptor, diagnostics_msg, homography_msg, image_msg
 from domplane_ros.ros.messages import parallax_msg, READ_ONLY, result_msg
@@ -90,7 +90,7 @@ class PlaneNode(Node):
         self._throttle = Throttle(_THROTTLE_S)
         self._qos_warned: set[str] = set()
         self._joint_speed: tuple[float, float] | None = None  # (rad/s, monotonic receive time)
-        self._camera_model: tuple[float, ...] | None = None  # the K applied to the prior
+        self._camera_info = CameraInfoTracker()
         self._implausible_joint: tuple[float, float] | None = None
         self.implausible_joint_states = 0
         self._make_publishers()
@@ -292,12 +292,10 @@ class PlaneNode(Node):
             self._warn_input(f'{self.config.transport.camera_info_topic}: {err}; ignored, the '
                              'prior stays as configured', key='camera_info')
             return
-        key = (model.focal_px, *model.principal_px)
-        if self._camera_model is not None and np.allclose(key, self._camera_model, rtol=1e-6):
-            return
-        self._camera_model = key
         tolerance = self.config.transport.camera_info_focal_tolerance
-        values = model.prior_values(tolerance)
+        values = self._camera_info.new_values(model, tolerance)
+        if values is None:
+            return
         configured = self.config.prior.focal_px
         results = self.set_parameters([Parameter(name, value=value)
                                        for name, value in values.items()])
@@ -305,14 +303,10 @@ class PlaneNode(Node):
         if failed:
             self.get_logger().error(f'camera_info not applied to the prior: {failed[0]}')
             return
-        low, high = values['prior.focal_px']
         note = ('' if configured[0] <= model.focal_px <= configured[1] else
                 f"; K's focal length is outside the configured [{configured[0]:g}, "
                 f'{configured[1]:g}]')
-        self.get_logger().info(
-            f'prior from camera_info: focal_px [{low:.1f}, {high:.1f}] (f {model.focal_px:.1f} '
-            f'+-{100 * tolerance:g} %), principal point ({model.principal_px[0]:.1f}, '
-            f'{model.principal_px[1]:.1f}){note}')
+        self.get_logger().info(self._camera_info.describe(model, values, tolerance) + note)
 
     def _on_joint_state(self, msg: JointState) -> None:
         velocities = np.abs(np.asarray(msg.velocity, dtype=np.float64))
