@@ -276,8 +276,8 @@ class TrustGate:
     def _one_surface(check: PlaneVerification) -> Verdict | None:
         """Return the refusal of a verified plane that is not one surface under the head.
 
-        Nothing may lie beyond the ground (:data:`MAX_BELOW_FRACTION`; not a rival of the
-        floor), and the ground explains the band between the top and bottom thirds it explains
+        Nothing may lie beyond the ground (:data:`MAX_BELOW_FRACTION`; a rival of a floor only
+        when it outscores it, :func:`~domplane_ros.stream.verdict.is_rival`), and the ground explains the band between the top and bottom thirds it explains
         (:data:`MIN_MIDDLE_SHARE`, where that band holds :data:`MIN_MIDDLE_TEXTURE` of the
         texture; still a rival: a look-alike of the floor). None if neither refuses it.
         """
@@ -285,7 +285,7 @@ class TrustGate:
             return Verdict(False, check, 'not the ground: '
                            f'{100 * check.below_fraction:.0f} % of the textured image lies '
                            f'beyond the plane (> {100 * MAX_BELOW_FRACTION:.0f} %); a plane '
-                           'through obstacles above the floor?', ground=False)
+                           'through obstacles above the floor?', ground=False, beyond=True)
         weaker = min(check.top_score, check.bottom_score)
         if (weaker >= MIN_OUTER_BAND_SCORE and check.middle_texture >= MIN_MIDDLE_TEXTURE
                 and check.middle_score < MIN_MIDDLE_SHARE * weaker):

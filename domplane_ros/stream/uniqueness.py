@@ -111,20 +111,25 @@ class Uniqueness:
         """
         height, width = left.shape
         best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
-        rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                        if is_rival(v, h, best_h, width, height)
-                        and not self.swap_refuted(left, right, best_h, verdict, h, v)]
-        top, top_swapped = max(rival_scores, default=(0.0, False))
-        verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
-                          contested=any(not swapped for _, swapped in rival_scores))
+        rivals = [v for _, h, v in judged
+                  if is_rival(v, h, best_h, width, height, best_score=verdict.score)
+                  and not self.swap_refuted(left, right, best_h, verdict, h, v)]
+        top = max(rivals, default=None, key=lambda v: v.score)
+        verdict = replace(verdict, uniqueness=(verdict.score / top.score if top and top.score > 0
+                                               else math.inf),
+                          contested=any(not v.swapped for v in rivals))
         if verdict.uniqueness >= CHALLENGE_MARGIN:
             shared = self.shared_rival(left, right, best_h, verdict, judged, roi)
             if shared:
                 return None, None, shared
             return best, verdict, ''
-        kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
+        if top.beyond:
+            return None, None, (f'ambiguous: a plane with texture beyond it explains the image '
+                                f'better (score {top.score:.2f} against {verdict.score:.2f}); '
+                                'the best fit of the ground is not verified')
+        kind = 'plane of swapped cameras' if top.swapped else 'distinct plane'
         return None, None, (f'ambiguous: a {kind} explains the image almost as well '
-                            f'(score {top:.2f} against {verdict.score:.2f} < '
+                            f'(score {top.score:.2f} against {verdict.score:.2f} < '
                             f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
 
     def shared_rival(self, left: np.ndarray, right: np.ndarray, best_h: np.ndarray,
