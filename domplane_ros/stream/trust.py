@@ -277,7 +277,8 @@ class TrustGate:
         """Return the refusal of a verified plane that is not one surface under the head.
 
         Nothing may lie beyond the ground (:data:`MAX_BELOW_FRACTION`; a rival of a floor only
-        when it outscores it, :func:`~domplane_ros.stream.verdict.is_rival`), and the ground explains the band between the top and bottom thirds it explains
+        when it outscores it, :func:`~domplane_ros.stream.verdict.is_rival`), and the ground
+        explains the band between the top and bottom thirds it explains
         (:data:`MIN_MIDDLE_SHARE`, where that band holds :data:`MIN_MIDDLE_TEXTURE` of the
         texture; still a rival: a look-alike of the floor). None if neither refuses it.
         """
