@@ -353,24 +353,38 @@ class PlanePipeline:
                 return
         # A plane of few corners (too few now, or a photometric lock): refine it photometrically.
         few = self._photometric or reason == self._checks.too_few_reason(feats)
-        if reason and few and self._photometric_lock(
-                step, prediction if prediction is not None else self._last_h, size):
-            return
+        if reason and few:
+            verdict = self._photometric_lock(
+                step, prediction if prediction is not None else self._last_h, size)
+            if verdict is not None and verdict.accepted:
+                return
+            if not self._photometric:
+                # The lock cannot be refined photometrically into a verified plane (no plane,
+                # or one the gate refuses) and its corners are gone: the view changed (a cut
+                # to a scene of few corners). Search at once, as a refused warm estimate does,
+                # instead of carrying it. Measured: cut tuning seed 186 (9 corners after the
+                # cut) re-locked after 4 pairs, the lock carried 2 pairs as 'tracking' first.
+                step.reason = reason
+                self._start_search()
+                return
         step.reason = reason
         self._lose_frame(step, prediction)
 
     def _photometric_lock(self, step: PairStep, start: np.ndarray, size: tuple[int, int]
-                          ) -> bool:
-        """Too few corners while locked: publish the start refined photometrically if verified."""
+                          ) -> Verdict | None:
+        """Too few corners while locked: publish the start refined photometrically if verified.
+
+        Returns the gate's verdict on the refined start (accepted: published), or None if the
+        refinement gave no plane.
+        """
         planes = self._work().photometric_planes(step, [start], size)
         if not planes:
-            return False
+            return None
         verdict = self._trust.judge(step.left, step.right, planes[0].homography,
                                     self.config.features.roi, locked=True)
-        if not verdict.accepted:
-            return False
-        self._verified(step, planes[0], verdict)
-        return True
+        if verdict.accepted:
+            self._verified(step, planes[0], verdict)
+        return verdict
 
     def _warm_check(self, step: PairStep, estimate: PlaneEstimate | FailedEstimate,
                     feats: Features, size: tuple[int, int], fast: bool, count: bool

@@ -95,7 +95,9 @@ def test_a_lock_whose_score_collapses_is_refused(scene, monkeypatch):
     assert gate.judge(scene.left, scene.right, scene.homography).accepted == weaker.accepted
 
 
-@pytest.mark.parametrize('seed', [0, 1, 3])
+# 186: a cut to a scene of 9 corners (evaluate_trust tuning seed 186): the lock, refined
+# photometrically, gives no plane; carried as 'tracking' it re-locked after 4 pairs.
+@pytest.mark.parametrize('seed', [0, 1, 3, 186])
 def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
     frames = cut_sequence(6, 6, seed)
     pipeline = PlanePipeline()
