@@ -138,12 +138,11 @@ class CandidateWork:
             # 5.2 px off the floor, whose refinement lands 0.07 px from it, was published
             # unrefined).
             final, again = self.photometric(step, problem, best, verdict)
-            return (final, replace(again, uniqueness=verdict.uniqueness,
-                                   contested=verdict.contested))
+            return final, replace(again, uniqueness=verdict.uniqueness)
         final, again = self.tightened(step, problem, final, again)
         final, again = self.photometric(step, problem, final, again)
         return (replace(final, candidates_tried=best.candidates_tried),
-                replace(again, uniqueness=verdict.uniqueness, contested=verdict.contested))
+                replace(again, uniqueness=verdict.uniqueness))
 
     def tightened(self, step: PairStep, problem: TwoStep, estimate: PlaneEstimate,
                   verdict: Verdict) -> tuple[PlaneEstimate, Verdict]:

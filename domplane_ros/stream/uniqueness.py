@@ -105,7 +105,7 @@ class Uniqueness:
             roi: Region of the left image (fractions), as ``features.roi``.
 
         Returns:
-            The winner and its verdict (uniqueness and ``contested`` set), or None, None and
+            The winner and its verdict (uniqueness set), or None, None and
             why the pair is ambiguous.
 
         """
@@ -116,8 +116,7 @@ class Uniqueness:
                   and not self.swap_refuted(left, right, best_h, verdict, h, v)]
         top = max(rivals, default=None, key=lambda v: v.score)
         verdict = replace(verdict, uniqueness=(verdict.score / top.score if top and top.score > 0
-                                               else math.inf),
-                          contested=any(not v.swapped for v in rivals))
+                                               else math.inf))
         if verdict.uniqueness >= CHALLENGE_MARGIN:
             shared = self.shared_rival(left, right, best_h, verdict, judged, roi)
             if shared:

@@ -51,9 +51,6 @@ class Verdict:
             refused for the band between the top and bottom it explains (a far wall aliasing
             a periodic floor, ``trust.MIN_MIDDLE_SHARE``) keeps True: a look-alike of the
             floor that explains as much still makes the pair ambiguous.
-        contested: A distinct plane of this head (not of swapped cameras) was judged beside
-            it (:meth:`TrustGate.pick`): its uniqueness was tested against the search's other
-            planes, not only against the swapped rivals. False outside a pick.
         beyond: Refused (``ground`` False) only for the texture that lies beyond it: a rival
             of a winner it outscores (:data:`BEYOND_RIVAL_SHARE`, :func:`is_rival`).
     """
@@ -64,7 +61,6 @@ class Verdict:
     swapped: bool = False
     uniqueness: float = math.inf
     ground: bool = True
-    contested: bool = False
     beyond: bool = False
 
     @property
