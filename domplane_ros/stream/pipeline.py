@@ -20,6 +20,7 @@ from domplane_ros.core.image import check_gray
 from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.pyramid import level_homography, WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
+from domplane_ros.core.verification import REASON_LOW_SUPPORT
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC
 from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, COARSE_STEP,
@@ -358,17 +359,33 @@ class PlanePipeline:
                 step, prediction if prediction is not None else self._last_h, size)
             if verdict is not None and verdict.accepted:
                 return
-            if not self._photometric:
-                # The lock cannot be refined photometrically into a verified plane (no plane,
-                # or one the gate refuses) and its corners are gone: the view changed (a cut
-                # to a scene of few corners). Search at once, as a refused warm estimate does,
+            if not self._photometric and self._view_changed(step, prediction, verdict):
+                # A corner lock whose corners are gone, and a textured image that neither the
+                # lock nor its photometric refinement explains: the view changed (a cut to a
+                # scene of few corners). Search at once, as a refused warm estimate does,
                 # instead of carrying it. Measured: cut tuning seed 186 (9 corners after the
                 # cut) re-locked after 4 pairs, the lock carried 2 pairs as 'tracking' first.
+                # A blank or textureless pair (a drop-out) says nothing: carried as before.
                 step.reason = reason
                 self._start_search()
                 return
         step.reason = reason
         self._lose_frame(step, prediction)
+
+    def _view_changed(self, step: PairStep, prediction: np.ndarray | None,
+                      refined: Verdict | None) -> bool:
+        """Return whether the pair's texture refutes the lock (too few corners to tell).
+
+        The lock's photometric refinement (``refined``, None if it gave no plane) or else the
+        lock itself is refused for explaining too little of a textured image
+        (:data:`~domplane_ros.core.verification.REASON_LOW_SUPPORT`); not for too little
+        texture or overlap.
+        """
+        if refined is None:
+            start = prediction if prediction is not None else self._last_h
+            refined = self._trust.judge(step.left, step.right, start,
+                                        self.config.features.roi, locked=True)
+        return refined.verification.reason == REASON_LOW_SUPPORT
 
     def _photometric_lock(self, step: PairStep, start: np.ndarray, size: tuple[int, int]
                           ) -> Verdict | None:
