@@ -30,7 +30,7 @@ from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.swap import swap_rivals
 from domplane_ros.stream.trust import TrustGate
-from domplane_ros.stream.verdict import Verdict
+from domplane_ros.stream.verdict import BEYOND_RIVAL_SHARE, Verdict
 import numpy as np
 
 # The swapped rivals stop at the candidates' tolerance (CandidateWork.rival_options); their
@@ -165,6 +165,9 @@ class PlaneSearch:
         if reason or isinstance(problem, FailedEstimate):
             step.reason = reason or problem.reason
             best, verdict, _ = self._photometric_search(step, size)
+            if verdict is not None and _beyond_refusal(verdict):
+                step.reason = _beyond_refusal(verdict)
+                return None
             return self._done(best, verdict)
         pool, rejection, limit = self._pool(step, search, problem, feats, size, motions)
         step.warm_start = 'search'
@@ -202,7 +205,11 @@ class PlaneSearch:
         if best is not None and verdict is not None:
             if best is step.initial:
                 step.warm_start = 'initial'
-            return self._done(*self._work().finished(step, problem, feats, size, best, verdict))
+            done = self._work().finished(step, problem, feats, size, best, verdict)
+            unverified = _beyond_refusal(done[1])
+            if not unverified:
+                return self._done(*done)
+            search.best = None
         if len(search.tried) < limit:
             step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
                            'refined')
@@ -404,3 +411,17 @@ class PlaneSearch:
         else:
             step.reason = 'prior search found no plane'
         self._search = None
+
+
+def _beyond_refusal(verdict: Verdict) -> str:
+    """Return why a finished winner is refused for a better plane beyond it ('' if not).
+
+    :data:`~domplane_ros.stream.verdict.BEYOND_RIVAL_SHARE`: the winner must score at least
+    that share of its ``beyond_rival``, the best plane of its pick refused only for the
+    texture beyond it.
+    """
+    if not verdict.beyond_rival or verdict.score >= BEYOND_RIVAL_SHARE * verdict.beyond_rival:
+        return ''
+    return (f'ambiguous: a plane refused for the texture beyond it explains the image better '
+            f'(score {verdict.beyond_rival:.2f} against {verdict.score:.2f} for the best plane '
+            'finished); a plane through obstacles, or the floor not found?')

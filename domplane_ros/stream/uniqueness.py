@@ -34,7 +34,8 @@ from domplane_ros.core.coarse import CoarseAligner
 from domplane_ros.core.flatness import one_plane_residual_px
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import AgreementMaps, own_region
-from domplane_ros.stream.verdict import CHALLENGE_MARGIN, distinct_planes, is_rival, Verdict
+from domplane_ros.stream.verdict import (BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, distinct_planes,
+                                         is_rival, Verdict)
 import numpy as np
 
 # In ground mode the winner must also beat every distinct plane of this head by
@@ -105,30 +106,30 @@ class Uniqueness:
             roi: Region of the left image (fractions), as ``features.roi``.
 
         Returns:
-            The winner and its verdict (uniqueness set), or None, None and
+            The winner and its verdict (uniqueness and ``beyond_rival`` set), or None, None and
             why the pair is ambiguous.
 
         """
         height, width = left.shape
         best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
-        rivals = [v for _, h, v in judged
-                  if is_rival(v, h, best_h, width, height, best_score=verdict.score)
-                  and not self.swap_refuted(left, right, best_h, verdict, h, v)]
-        top = max(rivals, default=None, key=lambda v: v.score)
-        verdict = replace(verdict, uniqueness=(verdict.score / top.score if top and top.score > 0
-                                               else math.inf))
+        rival_scores = [(v.score, v.swapped) for _, h, v in judged
+                        if is_rival(v, h, best_h, width, height)
+                        and not self.swap_refuted(left, right, best_h, verdict, h, v)]
+        top, top_swapped = max(rival_scores, default=(0.0, False))
+        # The best plane refused only for the texture beyond it, if it outscores the winner
+        # (BEYOND_RIVAL_SHARE): the search compares it with the winner once finished.
+        beyond = max((v.score for _, _, v in judged if v.beyond), default=0.0)
+        verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
+                          beyond_rival=(beyond if beyond >= BEYOND_RIVAL_SHARE * verdict.score
+                                        else 0.0))
         if verdict.uniqueness >= CHALLENGE_MARGIN:
             shared = self.shared_rival(left, right, best_h, verdict, judged, roi)
             if shared:
                 return None, None, shared
             return best, verdict, ''
-        if top.beyond:
-            return None, None, (f'ambiguous: a plane with texture beyond it explains the image '
-                                f'better (score {top.score:.2f} against {verdict.score:.2f}); '
-                                'the best fit of the ground is not verified')
-        kind = 'plane of swapped cameras' if top.swapped else 'distinct plane'
+        kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
         return None, None, (f'ambiguous: a {kind} explains the image almost as well '
-                            f'(score {top.score:.2f} against {verdict.score:.2f} < '
+                            f'(score {top:.2f} against {verdict.score:.2f} < '
                             f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
 
     def shared_rival(self, left: np.ndarray, right: np.ndarray, best_h: np.ndarray,
