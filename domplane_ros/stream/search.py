@@ -165,8 +165,9 @@ class PlaneSearch:
         if reason or isinstance(problem, FailedEstimate):
             step.reason = reason or problem.reason
             best, verdict, _ = self._photometric_search(step, size)
-            if verdict is not None and _beyond_refusal(verdict):
-                step.reason = _beyond_refusal(verdict)
+            refused = '' if verdict is None else _beyond_refusal(verdict)
+            if refused:
+                step.reason = refused
                 return None
             return self._done(best, verdict)
         pool, rejection, limit = self._pool(step, search, problem, feats, size, motions)
@@ -180,8 +181,8 @@ class PlaneSearch:
         pick = lambda: self._trust().pick(step.left, step.right, pool, roi, rivals)  # noqa: E731
         best, verdict, unverified = self._checked_pick(search, pick)
         if self._in_doubt(search, verdict, limit):
-            # A search in doubt (no verified plane, or a winner not far ahead of another
-            # plane): the coarse alignment after its further shifts, judged with the rest.
+            # A search in doubt (once, with a winner or on its last pair without one): the
+            # coarse alignment after its further shifts, judged with the rest.
             search.peaks_tried = True
             more = self._work().coarse(step, problem, feats, size, peaks=True,
                                        known=[plane.homography for plane in pool])

@@ -276,11 +276,12 @@ class TrustGate:
     def _one_surface(check: PlaneVerification) -> Verdict | None:
         """Return the refusal of a verified plane that is not one surface under the head.
 
-        Nothing may lie beyond the ground (:data:`MAX_BELOW_FRACTION`; a rival of a floor only
-        when it outscores it, :func:`~domplane_ros.stream.verdict.is_rival`), and the ground
-        explains the band between the top and bottom thirds it explains
-        (:data:`MIN_MIDDLE_SHARE`, where that band holds :data:`MIN_MIDDLE_TEXTURE` of the
-        texture; still a rival: a look-alike of the floor). None if neither refuses it.
+        Nothing may lie beyond the ground (:data:`MAX_BELOW_FRACTION`; no rival of the floor,
+        but a search's finished winner must outscore it,
+        :data:`~domplane_ros.stream.verdict.BEYOND_RIVAL_SHARE`), and the ground explains the
+        band between the top and bottom thirds it explains (:data:`MIN_MIDDLE_SHARE`, where
+        that band holds :data:`MIN_MIDDLE_TEXTURE` of the texture; still a rival: a look-alike
+        of the floor). None if neither refuses it.
         """
         if check.below_fraction > MAX_BELOW_FRACTION:
             return Verdict(False, check, 'not the ground: '
