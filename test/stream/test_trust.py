@@ -352,7 +352,8 @@ def test_the_published_winner_is_polished_on_its_closest_features(monkeypatch, s
     # neighbouring corners pull the fit; polished on the features within half of it, the
     # winner comes closer to the truth (measured on these seeds: 0.83 -> 0.17 px and
     # 0.84 -> 0.36 px; seed 17, 1.55 -> 0.81 px until session 14, has had a better winner
-    # since every search is in doubt: 0.58 -> 0.37 px). The guard: a polished plane that loses peak score is not taken.
+    # since every search is in doubt: 0.58 -> 0.37 px). The guard: a polished plane that
+    # loses peak score is not taken.
     seen = []
     tightened = CandidateWork.tightened
 
