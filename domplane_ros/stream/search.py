@@ -52,7 +52,8 @@ RIVAL_RECHECK_UNIQUENESS = 2.25
 # published 84 px off at uniqueness 6.9 and confidence 1.0 with no rule in doubt, and the
 # further shifts find the truth beside it (refused as ambiguous). Measured (session 14,
 # evaluate_trust --no-orb, tuning seeds 0-29, 150-179, 180-209): docs/BENCHMARKS.md, trust
-# round 15; a cold search costs about 4 % more (paired median, 20 rendered scenes).
+# round 15. Cost: a cold search about 1.3-1.4x the time of one under those rules (paired
+# median ratios, 12 rendered scenes each of cold, rough checker/tile/plank, faint tiles).
 
 # A search in doubt that still has no verified plane refines its near misses photometrically
 # (CandidateWork.rescued): the NEAR_MISSES best distinct planes refused only for explaining too
