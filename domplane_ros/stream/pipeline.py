@@ -355,11 +355,11 @@ class PlanePipeline:
         # A plane of few corners (too few now, or a photometric lock): refine it photometrically.
         few = self._photometric or reason == self._checks.too_few_reason(feats)
         if reason and few:
-            verdict = self._photometric_lock(
-                step, prediction if prediction is not None else self._last_h, size)
+            start = prediction if prediction is not None else self._last_h
+            verdict = self._photometric_lock(step, start, size)
             if verdict is not None and verdict.accepted:
                 return
-            if not self._photometric and self._view_changed(step, prediction, verdict):
+            if not self._photometric and self._view_changed(step, start, verdict):
                 # A corner lock whose corners are gone, and a textured image that neither the
                 # lock nor its photometric refinement explains: the view changed (a cut to a
                 # scene of few corners). Search at once, as a refused warm estimate does,
@@ -372,17 +372,16 @@ class PlanePipeline:
         step.reason = reason
         self._lose_frame(step, prediction)
 
-    def _view_changed(self, step: PairStep, prediction: np.ndarray | None,
-                      refined: Verdict | None) -> bool:
+    def _view_changed(self, step: PairStep, start: np.ndarray, refined: Verdict | None
+                      ) -> bool:
         """Return whether the pair's texture refutes the lock (too few corners to tell).
 
         The lock's photometric refinement (``refined``, None if it gave no plane) or else the
-        lock itself is refused for explaining too little of a textured image
-        (:data:`~domplane_ros.core.verification.REASON_LOW_SUPPORT`); not for too little
-        texture or overlap.
+        lock itself (``start``, carried to this pair) is refused for explaining too little of
+        a textured image (:data:`~domplane_ros.core.verification.REASON_LOW_SUPPORT`); not
+        for too little texture or overlap.
         """
         if refined is None:
-            start = prediction if prediction is not None else self._last_h
             refined = self._trust.judge(step.left, step.right, start,
                                         self.config.features.roi, locked=True)
         return refined.verification.reason == REASON_LOW_SUPPORT
