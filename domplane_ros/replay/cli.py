@@ -71,7 +71,8 @@ from domplane_ros.params_file import node_name_hint
 from domplane_ros.replay.paths import (create_output, missing_folders, remove_empty_folders,
                                        RunPaths)
 from domplane_ros.replay.reader import (BagInput, BagReadError, CAMERA_INFO, describe_error,
-                                        header_stamp_ns, ReplayedFrame, ReplaySession)
+                                        header_stamp_ns, JOINT_STATES, ReplayedFrame,
+                                        ReplaySession)
 from domplane_ros.replay.report import CsvOutput, PROG, ReplaySummary
 from domplane_ros.replay.writer import (BagOutput, BagWriteError, DiagnosticsClock,
                                         keep_partial, set_run_metadata, STORAGES)
@@ -155,7 +156,7 @@ def run_replay(input_bag: str | os.PathLike[str], output_bag: str | os.PathLike[
     t_start = time.perf_counter()
     config = config if config is not None else PlaneNodeConfig()
     with BagInput(paths.input_bag, left_topic, right_topic,
-                  config.transport.camera_info_topic) as bag:
+                  config.transport.camera_info_topic, config.head.joint_states_topic) as bag:
         run = _Run(bag, paths, config, bag.sides_topics(), storage or bag.storage, force,
                    progress,
                    debug_images, parallax)
@@ -198,10 +199,6 @@ class _Run:
         self._noted = 0     # undecodable messages given to the session so far
         self._image_warned = False
         self.summary.notes = list(bag.notes)
-        if config.head.joint_states_topic:
-            self.summary.notes.append(
-                f'head.joint_states_topic {config.head.joint_states_topic!r} is not replayed: '
-                "the joints' hint to expect a big change is the live node's only")
 
     def execute(self, on_frame: Callable[[ReplayedFrame], None] | None, strict: bool,
                 keep: bool) -> None:
@@ -212,9 +209,12 @@ class _Run:
                 if item.side == CAMERA_INFO:
                     self._note(self.session.apply_camera_info(item.msg))
                     continue
+                if item.side == JOINT_STATES:
+                    self._note(self.session.add_joint_state(item.msg, item.bag_time_ns))
+                    continue
                 self._write_diagnostics(self.clock.tick(header_stamp_ns(item.msg)))
                 self._count_message(item.side)
-                for frame in self.session.add(item.side, item.msg):
+                for frame in self.session.add(item.side, item.msg, item.bag_time_ns):
                     self._write_frame(frame, on_frame)
                 self._show_progress()
             self._take_undecodable(strict)

@@ -13,7 +13,7 @@ from __future__ import annotations
 from dataclasses import replace
 import os
 from pathlib import Path
-from typing import Any, Iterable, Iterator, NamedTuple
+from typing import Any, Callable, Iterable, Iterator, NamedTuple
 
 from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.image import message_to_gray
@@ -32,6 +32,9 @@ IMAGE_TYPES = (IMAGE_TYPE, COMPRESSED_IMAGE_TYPE)
 CAMERA_INFO_TYPE = 'sensor_msgs/msg/CameraInfo'
 # BagMessage.side of the camera_info.topic's messages.
 CAMERA_INFO = 'camera_info'
+JOINT_STATE_TYPE = 'sensor_msgs/msg/JointState'
+# BagMessage.side of the head.joint_states_topic's messages.
+JOINT_STATES = 'joint_states'
 
 # One processed pair of a replay (the session's processed pair; the name the tools use).
 ReplayedFrame = ProcessedPair
@@ -149,6 +152,20 @@ class ReplaySession(StreamSession):
         """Make a fresh session whose clock starts at the first message's stamp."""
         super().__init__(config, topics, start=None, tick_s=1e-9)
         self._camera_info = CameraInfoTracker()
+        self._received_s: float | None = None   # the newest bag (receive) time read, s
+
+    def add_joint_state(self, msg: Any, received_ns: int) -> str:
+        """Take a ``sensor_msgs/JointState`` recorded at bag time ``received_ns``.
+
+        As plane_node takes it on arrival: the fastest joint is the pipeline's hint to expect a
+        big change for ``head.max_age_s`` of bag time (:class:`JointSpeeds`).
+
+        Returns:
+            A one-line warning for an implausible speed (no hint then), else ''.
+
+        """
+        self._received_s = received_ns * 1e-9
+        return self.joints.observe(msg.velocity, msg.name, self._received_s)
 
     def apply_camera_info(self, msg: Any) -> str:
         """Narrow the prior from the left camera's K, as plane_node does (once per distinct K).
@@ -179,12 +196,16 @@ class ReplaySession(StreamSession):
         self.update_config(replace(self.config, prior=prior))
         return self._camera_info.describe(model, values, tolerance)
 
-    def add(self, side: Side, msg: Any) -> list[ReplayedFrame]:
+    def add(self, side: Side, msg: Any, received_ns: int | None = None
+            ) -> list[ReplayedFrame]:
         """Add one image message and process the pairs it completes.
 
         Args:
             side: ``'left'`` or ``'right'``.
             msg: The image message (``header``, and the Image or CompressedImage fields).
+            received_ns: Its bag (receive) time: a pair it completes gets the joint speed
+                recent at that time, as the live node's pair gets the speed recent when it is
+                processed (None: no joint speed).
 
         Returns:
             The processed pairs (none or one); a pair whose images do not decode is counted in
@@ -193,7 +214,10 @@ class ReplaySession(StreamSession):
         """
         stamp_ns = header_stamp_ns(msg)
         pairs, _ = self.receive(side, stamp_ns, msg, stamp_ns)
-        frames = [self.process(pair) for pair in pairs]
+        if received_ns is not None:
+            self._received_s = received_ns * 1e-9
+        speed = self._joint_value(self.joints.speed)
+        frames = [self.process(pair, speed) for pair in pairs]
         return [frame for frame in frames if frame is not None]
 
     def diagnostic_values(self, rate: float, now_ns: int | None = None
@@ -212,13 +236,24 @@ class ReplaySession(StreamSession):
         """
         newest = self.activity.newest()
         now = now_ns if now_ns is not None else (newest if newest is not None else 0)
-        return self.status(now, rate=rate)
+        joints = bool(self.config.head.joint_states_topic)
+        return self.status(now, rate=rate, joint_speed=self._joint_value(self.joints.speed),
+                           implausible_joint_speed=self._joint_value(
+                               self.joints.implausible_speed),
+                           implausible_joint_states=(self.joints.implausible_count
+                                                     if joints else None))
+
+    def _joint_value(self, value: Callable[[float], float | None]) -> float | None:
+        """Return a joint speed at the newest bag time read (None before any, or no topic)."""
+        if not self.config.head.joint_states_topic or self._received_s is None:
+            return None
+        return value(self._received_s)
 
 
 class BagMessage(NamedTuple):
-    """One message read from the bag: an image (side left or right) or a CameraInfo."""
+    """One message read from the bag: an image (left or right), a CameraInfo or a JointState."""
 
-    side: str   # 'left', 'right' or CAMERA_INFO
+    side: str   # 'left', 'right', CAMERA_INFO or JOINT_STATES
     bag_time_ns: int
     msg: Any
 
@@ -265,20 +300,26 @@ class BagInput:
         camera_info_topic: The node's ``camera_info.topic`` ('' for none): its messages are
             yielded too, side :data:`CAMERA_INFO`. Missing from the bag: :attr:`notes` says
             so and the prior stays as configured, as the node's would without it.
+        joint_states_topic: The node's ``head.joint_states_topic`` ('' for none): its
+            messages are yielded too, side :data:`JOINT_STATES`. Missing from the bag:
+            :attr:`notes` says so, and the pairs get no joint hint.
 
     Raises:
         BagError: If the bag does not exist or cannot be opened, or a topic is missing or is
             not an image topic (the message lists the bag's image topics), or the
-            camera_info topic is not a CameraInfo topic.
+            camera_info topic is not a CameraInfo topic, or the joint states topic not a
+            JointState topic.
 
     """
 
     def __init__(self, path: str | os.PathLike[str], left_topic: str,
-                 right_topic: str, camera_info_topic: str = '') -> None:
+                 right_topic: str, camera_info_topic: str = '',
+                 joint_states_topic: str = '') -> None:
         """Open the bag and check the topics."""
         self.path = Path(path)
         self.notes: list[str] = []
         self.camera_info_topic = ''
+        self.joint_states_topic = ''
         if not self.path.exists():
             raise BagError(f'input bag {str(self.path)!r} does not exist')
         self.typestore = typestore()
@@ -318,9 +359,16 @@ class BagInput:
                 self.sides[topic] = side
             if len(self.sides) < 2:
                 raise BagError(f'left and right topics are the same: {left_topic!r}')
-            self._camera_info(camera_info_topic, topics)
-            self.connections = [c for c in self._reader.connections
-                                if c.topic in self.sides or c.topic == self.camera_info_topic]
+            self.camera_info_topic = self._optional_topic(
+                'camera_info.topic', camera_info_topic, CAMERA_INFO_TYPE, topics,
+                'the prior stays as configured')
+            self.joint_states_topic = self._optional_topic(
+                'head.joint_states_topic', joint_states_topic, JOINT_STATE_TYPE, topics,
+                'the pairs get no joint hint')
+            self._kinds = {**self.sides, self.camera_info_topic: CAMERA_INFO,
+                           self.joint_states_topic: JOINT_STATES}
+            self._kinds.pop('', None)
+            self.connections = [c for c in self._reader.connections if c.topic in self._kinds]
             self.counts = {side: sum(c.msgcount for c in self.connections
                                      if self.sides.get(c.topic) == side)
                            for side in ('left', 'right')}
@@ -328,18 +376,20 @@ class BagInput:
             self.close()
             raise
 
-    def _camera_info(self, name: str, topics: dict[str, str]) -> None:
+    def _optional_topic(self, parameter: str, name: str, msgtype: str,
+                        topics: dict[str, str], without: str) -> str:
+        """Return the bag's topic for an optional input ('' if none or missing: noted)."""
         if not name:
-            return
+            return ''
         topic = _bag_topic(name, topics)
         if topic not in topics:
-            self.notes.append(f'camera_info.topic {clip_text(name, 80)!r} is not in the bag: '
-                              'the prior stays as configured')
-        elif topics[topic] != CAMERA_INFO_TYPE:
-            raise BagError(f'camera_info.topic {topic!r} has type '
-                           f'{clip_text(topics[topic], 80)}, not {CAMERA_INFO_TYPE}')
-        else:
-            self.camera_info_topic = topic
+            self.notes.append(f'{parameter} {clip_text(name, 80)!r} is not in the bag: '
+                              + without)
+            return ''
+        if topics[topic] != msgtype:
+            raise BagError(f'{parameter} {topic!r} has type '
+                           f'{clip_text(topics[topic], 80)}, not {msgtype}')
+        return topic
 
     def sides_topics(self) -> tuple[str, str]:
         """Return the ``(left, right)`` topic names."""
@@ -377,8 +427,7 @@ class BagInput:
                     f'{connection.topic} message {count} cannot be deserialised: '
                     f'{describe_error(err)}')
                 continue
-            yield BagMessage(self.sides.get(connection.topic, CAMERA_INFO), int(bag_time_ns),
-                             msg)
+            yield BagMessage(self._kinds[connection.topic], int(bag_time_ns), msg)
 
     def close(self) -> None:
         """Close the bag (idempotent)."""

@@ -21,7 +21,7 @@ CSV_COLUMNS = (
     'final_energy', 'converged',
     'h00', 'h01', 'h02', 'h10', 'h11', 'h12', 'h20', 'h21', 'h22',
     'features_ms', 'estimate_ms', 'mask_ms', 'total_ms', 'state', 'warm_start', 'confidence',
-    'reason',
+    'reason', 'fast_motion',
 )
 
 
@@ -62,6 +62,7 @@ class CsvOutput:
             *[f'{timings.get(k, float("nan")):.3f}'
               for k in ('features', 'estimate', 'mask', 'total')],
             result.state, result.warm_start, f'{result.confidence:.3f}', result.reason,
+            int(result.fast_motion),
         ])
         self.rows += 1
 

@@ -22,7 +22,6 @@ from typing import Any, Sequence
 from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.config import (check_value, ConfigError, PARAMETERS, PARAMETERS_BY_NAME,
                                  PlaneNodeConfig, unknown_parameter_message)
-from domplane_ros.errors import wire_repr
 from domplane_ros.ros.camera_info import camera_model, CameraInfoTracker
 from domplane_ros.ros.handover import NewestSlot
 from domplane_ros.ros.messages import descriptor, diagnostics_msg, homography_msg, image_msg
@@ -34,9 +33,8 @@ from domplane_ros.stream.frame import parallax_image
 from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.stream.session import ProcessedPair, SIDES, StreamSession
-from domplane_ros.stream.status import format_number, STATUS_NAME
+from domplane_ros.stream.status import STATUS_NAME
 from domplane_ros.stream.sync import Pair
-import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -89,10 +87,7 @@ class PlaneNode(Node):
         self._stopping = False
         self._throttle = Throttle(_THROTTLE_S)
         self._qos_warned: set[str] = set()
-        self._joint_speed: tuple[float, float] | None = None  # (rad/s, monotonic receive time)
         self._camera_info = CameraInfoTracker()
-        self._implausible_joint: tuple[float, float] | None = None
-        self.implausible_joint_states = 0
         self._make_publishers()
         self._subs = self._make_subscriptions(config)
         topics = tuple(sub.topic_name for sub in self._subs)
@@ -309,41 +304,25 @@ class PlaneNode(Node):
         self.get_logger().info(self._camera_info.describe(model, values, tolerance) + note)
 
     def _on_joint_state(self, msg: JointState) -> None:
-        velocities = np.abs(np.asarray(msg.velocity, dtype=np.float64))
-        finite = np.isfinite(velocities)
-        if not finite.any():
-            return  # no velocities: no hint
-        fastest = int(np.argmax(np.where(finite, velocities, -1.0)))
-        speed, now = float(velocities[fastest]), time.monotonic()
-        limit = self.config.head.max_joint_velocity
-        if speed > limit:
-            # A sensor fault or a unit mix-up, not a head this fast: flagged, never a hint.
-            name = msg.name[fastest] if fastest < len(msg.name) else f'#{fastest}'
-            self._implausible_joint = (speed, now)
-            self.implausible_joint_states += 1
-            self._warn_input(f'implausible head joint speed {format_number(speed, 3)} rad/s '
-                             f'(joint {wire_repr(name)}) > head.max_joint_velocity {limit:g}: '
-                             'ignored', key='implausible joint speed')
-            return
-        self._joint_speed = (speed, now)
-        self._implausible_joint = None   # the latest message is plausible again
+        warning = self.session.joints.observe(msg.velocity, msg.name, time.monotonic())
+        if warning:
+            self._warn_input(warning, key='implausible joint speed')
+
+    @property
+    def implausible_joint_states(self) -> int:
+        """Return how many joint states were flagged implausible so far."""
+        return self.session.joints.implausible_count
 
     def joint_speed(self) -> float | None:
         """Return the head's latest largest joint speed in rad/s, or None if none is recent.
 
         Implausible speeds (above ``head.max_joint_velocity``) are never returned.
         """
-        latest = self._joint_speed
-        if latest is None or time.monotonic() - latest[1] > self.config.head.max_age_s:
-            return None
-        return latest[0]
+        return self.session.joints.speed(time.monotonic())
 
     def implausible_joint_speed(self) -> float | None:
         """Return a recent joint speed above ``head.max_joint_velocity`` (rad/s), or None."""
-        flagged = self._implausible_joint
-        if flagged is None or time.monotonic() - flagged[1] > self.config.head.max_age_s:
-            return None
-        return flagged[0]
+        return self.session.joints.implausible_speed(time.monotonic())
 
     # --- Processing ----------------------------------------------------------------------
     def _work(self) -> None:
@@ -410,7 +389,7 @@ class PlaneNode(Node):
         level, message, values = self.session.status(
             time.monotonic(), dropped_busy=self.slot.dropped, joint_speed=self.joint_speed(),
             implausible_joint_speed=self.implausible_joint_speed(),
-            # Counted only with a joint topic: without one the keys stay the replay's.
+            # Counted only with a joint topic, as in the replay.
             implausible_joint_states=(self.implausible_joint_states
                                       if self._joint_sub is not None else None),
             silence_hint=self._incompatible_qos_hint)

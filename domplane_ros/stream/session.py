@@ -30,6 +30,7 @@ from domplane_ros.core.estimator import PlaneEstimate
 from domplane_ros.core.image import is_mono16, message_to_gray, mono16_range_warning
 from domplane_ros.errors import clip_text, ImageDecodeError
 from domplane_ros.stream.health import homography_problem, InputCounts, StampChecks
+from domplane_ros.stream.joints import JointSpeeds
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 from domplane_ros.stream.status import plane_status
 from domplane_ros.stream.sync import ApproximateTimeSync, Pair, Side
@@ -192,6 +193,8 @@ class StreamSession:
         self.sync = ApproximateTimeSync(self.config.sync.slop_s, self.config.sync.queue_size)
         self.stamp_checks = StampChecks(self.sync.slop_ns, self.counts)
         self.activity = CameraActivity(topics, start, tick_s)
+        # The head's joint speeds (head.joint_states_topic), in the adapter's receive clock.
+        self.joints = JointSpeeds(self.config.head)
         self.latencies_ms: deque[float] = deque(maxlen=LATENCY_WINDOW)
         self.last_result: FrameResult | None = None
         # The last result with the lock state the pipeline had right after it: a status shows
@@ -222,6 +225,7 @@ class StreamSession:
                 self.sync = ApproximateTimeSync(config.sync.slop_s, config.sync.queue_size)
                 self.stamp_checks = StampChecks(self.sync.slop_ns, self.counts)
             self.pipeline.update_config(config)
+            self.joints.settings = config.head
             self.config = config
             self._shown = (self._shown[0], self.pipeline.state)
 

@@ -61,8 +61,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         implausible_joint_speed: A recent joint speed above ``head.max_joint_velocity``
             (rad/s), ignored as a hint; shown instead of the joint speed.
         implausible_joint_states: Joint states with such a speed so far, or None without
-            joint input (then the key ``joint states implausible`` is left out, as the
-            replay, which has no joint input, leaves it out).
+            joint input (``head.joint_states_topic`` not set: then the key ``joint states
+            implausible`` is left out, in the node and the replay alike).
         plane: ``verification.plane``; shown as ``plane sought``, with what ``any`` turns off.
         image_warning: The last pair's image warning (mono16 data far below
             ``image.mono16_bits``), shown as ``image warning`` ('none' if '').
