@@ -12,8 +12,9 @@ from __future__ import annotations
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
 from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.sim.generators import random_scene, SETUP_RANGES
-from domplane_ros.sim.rigs import plane_error_px
+from domplane_ros.sim.rigs import plane_error_px, random_rig_error, rough_rig
 from domplane_ros.stream.pipeline import PlanePipeline
+import numpy as np
 import pytest
 
 
@@ -30,4 +31,18 @@ def test_a_floor_of_a_head_inside_the_default_prior_is_published(seed):
         assert lo <= getattr(setup, name) <= hi, name
     result = PlanePipeline(one_shot_search(PlaneNodeConfig())).process(
         frame.left, frame.right, 0)
+    assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
+
+
+def test_a_rough_rigs_floor_is_not_refused_as_swapped_cameras():
+    # Tuning seed 71 of evaluate_trust's rough case: the true floor grows by about 0.05 px per
+    # row, but the search's winning candidate, 1.3 px off before it is finished, by 0.0375.
+    # Main publishes the finished plane 0.13 px off at confidence 1.0. With the least
+    # published slope checked on the unfinished candidates, the winner is refused, no plane
+    # is verified and the pair is reported as swapped cameras ("swap the image topics").
+    seed = 71
+    frame = rough_rig(random_scene(seed), random_rig_error(np.random.default_rng((seed, 77))))
+    result = PlanePipeline(one_shot_search(PlaneNodeConfig())).process(
+        frame.left, frame.right, 0)
+    assert 'swapped' not in result.reason, result.reason
     assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
