@@ -251,6 +251,26 @@ class CandidateWork:
                 break
         return estimate, verdict
 
+    def contended(self, step: PairStep, problem: TwoStep, estimate: PlaneEstimate,
+                  verdict: Verdict) -> tuple[PlaneEstimate, Verdict]:
+        """Refine a contender of an ambiguous pick photometrically while that raises its score.
+
+        Up to :data:`PHOTOMETRIC_FINISH_ROUNDS` rounds at the finishing width, stopping at a
+        round that does not raise the score (verified or not: a rival refined only gets
+        stronger). Returns ``estimate`` itself and ``verdict`` if no round did. The search
+        decides what to do with it (:data:`~domplane_ros.stream.search.CONTENDERS`).
+        """
+        for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
+            refined = self.trust.refined(step.left, step.right, estimate.homography,
+                                         finish=True)
+            if refined is None or check_homography(refined):
+                break
+            again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
+            if again.verification.score <= verdict.verification.score:
+                break
+            estimate, verdict = self._moved(problem, estimate, refined), again
+        return estimate, verdict
+
     def _moved(self, problem: TwoStep, estimate: PlaneEstimate, homography: np.ndarray
                ) -> PlaneEstimate:
         """Return the estimate at another homography, its features matched again."""

@@ -30,7 +30,7 @@ from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.swap import swap_rivals
 from domplane_ros.stream.trust import TrustGate
-from domplane_ros.stream.verdict import BEYOND_RIVAL_SHARE, Verdict
+from domplane_ros.stream.verdict import BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, Verdict
 import numpy as np
 
 # The swapped rivals stop at the candidates' tolerance (CandidateWork.rival_options); their
@@ -61,6 +61,22 @@ RIVAL_RECHECK_UNIQUENESS = 2.25
 # BENCHMARKS.md, trust round 8.
 NEAR_MISS_RATIO = 0.8
 NEAR_MISSES = 2
+
+# A ground search whose pick is ambiguous between planes of this head (not with a plane of
+# swapped cameras) refines its contenders photometrically once and picks again
+# (PlaneSearch._refine_contenders): the CONTENDERS best ground planes of this head scoring at
+# least 1 / CHALLENGE_MARGIN of the best verified one, each refined while that raises its
+# score (CandidateWork.contended) and replaced by its refinement only if that is still a ground
+# plane of this head. On a faint floor of large tiles (few corners, mostly the boxes') the
+# search's fits of the floor lie 3-7 px off it and, mapping the image bottom more than 8 px
+# apart, make each other ambiguous; refined, they land on the floor together (tuning faint
+# seed 7001: 2.9 and 4.5 px off, 0.53 and 0.55, refined 0.1 px off). A look-alike a period off
+# stays one (the refinement fits only samples within REFINE_NEAR_PX of the plane), and only
+# gets stronger: a rival is dropped only where its own refinement joins the winner.
+CONTENDERS = 6
+REFINE_CONTENDERS = True
+# The reason of a pick ambiguous between planes of this head (Uniqueness.ground_winner).
+AMBIGUOUS_DISTINCT = 'ambiguous: a distinct plane'
 
 __all__ = ['PlaneSearch', 'propagate']
 
@@ -97,6 +113,7 @@ class _Search:
     rivals_full: bool = False  # rivals refined to the configured tolerance (rechecked)
     peaks_tried: bool = False  # the coarse alignment's further shifts refined (in doubt)
     siblings_tried: bool = False  # the winner's period siblings judged (plane any)
+    contenders_tried: bool = False  # an ambiguous pick's contenders refined (ground)
 
 
 class PlaneSearch:
@@ -191,6 +208,12 @@ class PlaneSearch:
                 pool += more
                 best, verdict, unverified = self._checked_pick(search, pick)
             if verdict is None and self._rescue_near_misses(step, problem, pool, feats, size):
+                best, verdict, unverified = self._checked_pick(search, pick)
+        if (verdict is None and REFINE_CONTENDERS and not search.contenders_tried
+                and unverified.startswith(AMBIGUOUS_DISTINCT)
+                and self._config().verification.plane != 'any'):
+            search.contenders_tried = True
+            if self._refine_contenders(step, search, problem, pool, feats, size):
                 best, verdict, unverified = self._checked_pick(search, pick)
         if verdict is not None and self._config().verification.plane == 'any':
             best, verdict, unverified = self._sibling_pick(step, search, pool, best, pick)
@@ -291,6 +314,39 @@ class PlaneSearch:
                 pool.append(rescued)
                 added = True
         return added
+
+    def _refine_contenders(self, step: PairStep, search: _Search, problem: TwoStep,
+                           pool: list[PlaneEstimate], feats: Features,
+                           size: tuple[int, int]) -> bool:
+        """Refine an ambiguous pick's contenders in the pool; return whether any moved.
+
+        See :data:`CONTENDERS`. Not where a plane of swapped cameras (judged in the pool or
+        among the search's rivals) scores within the margin of the best verified plane: a
+        refined plane of this head could then outscore the swapped cameras' floor.
+        """
+        trust, cfg = self._trust(), self._config()
+        roi = cfg.features.roi
+        judged = [(trust.judge(step.left, step.right, plane.homography, roi), plane)
+                  for plane in pool]
+        top = max((v.score for v, _ in judged if v.accepted), default=0.0)
+        least = top / CHALLENGE_MARGIN
+        swapped = [v for v, _ in judged if v.swapped]
+        swapped += [trust.judge(step.left, step.right, rival, roi)
+                    for rival in search.rivals or []]
+        if top <= 0.0 or any(v.score >= least for v in swapped if v.swapped):
+            return False
+        contenders = sorted(((v, plane) for v, plane in judged
+                             if v.ground and not v.swapped and v.score >= least),
+                            key=lambda item: -item[0].score)[:CONTENDERS]
+        work, moved = self._work(), False
+        for verdict, plane in contenders:
+            refined, again = work.contended(step, problem, plane, verdict)
+            if (refined is plane or not again.ground or again.swapped
+                    or self._checks.rejection_reason(refined, feats, size, bounds=False)):
+                continue
+            pool[next(i for i, other in enumerate(pool) if other is plane)] = refined
+            moved = True
+        return moved
 
     def _done(self, best: PlaneEstimate | None, verdict: Verdict | None
               ) -> tuple[PlaneEstimate, Verdict] | None:
