@@ -187,7 +187,8 @@ class PlanePipeline:
         # Every plane of this pair shares one shrink, from the working level.
         self._trust.begin_pair(left, right, (work[0].image, work[1].image, work[0].level))
         try:
-            step = self._estimate(PairStep(left=left, right=right, track_lost=tracked.lost),
+            step = self._estimate(PairStep(left=left, right=right,
+                                           track_lost=self._track_lost(tracked, feats)),
                                   feats, motions, fast)
         finally:
             self._trust.end_pair()
@@ -316,6 +317,16 @@ class PlanePipeline:
         feats, corners = detect_features(left, right, self.config)
         corners = self._tracking_points(left, right, corners)
         return feats, corners, tracked, None, (time.perf_counter() - t1, t1 - t0)
+
+    def _track_lost(self, tracked: Tracked, feats: Features) -> bool:
+        """Return whether this pair does not continue the previous one (a cut).
+
+        The previous pair's corners could not be tracked into it (``tracked.lost``) although
+        it has corners enough to track (``tracking.min_tracks`` in each image): a blank or
+        textureless pair (a drop-out) says nothing, as in :meth:`_view_changed`.
+        """
+        least = self.config.tracking.min_tracks
+        return tracked.lost and min(feats.n_left, feats.n_right) >= least
 
     # --- Locked and tracking ---------------------------------------------------------------
     def _track_or_lock(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
