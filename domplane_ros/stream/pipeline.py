@@ -43,10 +43,12 @@ LOCKED = 'locked'        # the last frame gave a plane; the next one warm-starts
 TRACKING = 'tracking'    # an estimate failed; the last plane is carried through the motion
 SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidates per frame
 
-# A locked (or tracking) pair whose previous pair cannot be tracked into it
-# (motion.Tracked.lost): 'search' drops the lock and searches in this pair, 'seeded' searches
-# with the lock as the search's best so far, 'off' warm-starts from the lock as before.
-LOST_TRACK = 'search'
+# A locked (or tracking) pair whose previous pair cannot be tracked into it (a lost track,
+# _track_lost): True drops the lock and searches in this pair, False warm-starts from the lock
+# as before session 15. Measured (evaluate_trust cuts, tuning seeds 0-60, docs/BENCHMARKS.md
+# round 16): re-lock later than 3 pairs after 4 cuts -> 1 (22, whose true plane the gate
+# refuses), published 455 -> 475 of 488 pairs, correct 431 -> 457, wrong 0 -> 0.
+SEARCH_ON_LOST_TRACK = True
 
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
@@ -333,13 +335,12 @@ class PlanePipeline:
                        size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
                        fast: bool) -> None:
         assert self._last_h is not None
-        if step.track_lost and LOST_TRACK != 'off':
-            # The previous pair cannot be tracked into this one: the view jumped (a cut).
-            # See LOST_TRACK: the lock is no warm start here; search in this pair.
-            last = self._last_h
+        if step.track_lost and SEARCH_ON_LOST_TRACK:
+            # The previous pair cannot be tracked into this one: the view jumped (a cut). The
+            # lock is no warm start here (it slid onto near planes of the new floor, 2.65 and
+            # 4.48 px off, and passed the gate): search in this pair.
+            step.reason = 'lost track: the previous pair cannot be tracked into this one'
             self._start_search()
-            if LOST_TRACK == 'seeded':
-                self._searcher.seed(last)
             return
         prediction = propagate(self._last_h, motions)
         if prediction is not None and self._checks.bounds_reason(prediction, size, count=False):

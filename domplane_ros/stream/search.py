@@ -137,10 +137,6 @@ class PlaneSearch:
         """Drop the search: the next :meth:`step` starts a new one."""
         self._search = None
 
-    def seed(self, best: np.ndarray) -> None:
-        """Start a new search whose best so far is ``best`` (3, 3), refined in its first pair."""
-        self._search = _Search(best=best)
-
     def prior_changed(self) -> None:
         """Forget the prior's candidates (the prior changed)."""
         self._candidates_cache.clear()

@@ -116,7 +116,7 @@ def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
 # tuning seeds, 8 pairs before and after): the lock, warm-started from the last plane, slid
 # onto the new floor 2.65 px off (60; verified, 5 pairs to come within 1 px) or failed and was
 # carried as 'tracking' for 2 pairs before a search (19: re-lock after 4 pairs). A lost track
-# is a cut: the search runs in the first pair after it (pipeline.LOST_TRACK).
+# is a cut: the search runs in the first pair after it (pipeline.SEARCH_ON_LOST_TRACK).
 @pytest.mark.parametrize('seed', [19, 60])
 def test_a_cut_that_breaks_the_track_searches_at_once(seed):
     frames = cut_sequence(8, 8, seed)
