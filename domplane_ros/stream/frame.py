@@ -133,6 +133,7 @@ class PairStep:
     left: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
     right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
     challenge_s: float = 0.0
+    track_lost: bool = False  # the previous pair could not be tracked into this one
 
 
 def stage_timings_ms(t0: float, spans: tuple[float, float], t3: float, t4: float, t5: float,

@@ -23,7 +23,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Sequence
 
-from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.config import PlaneNodeConfig, TrackingConfig
 from domplane_ros.core.pyramid import motion_to_full, WorkingImage
 from domplane_ros.core.tracking import camera_motion, CameraMotion, fit_camera_motion, \
     track_forward
@@ -60,12 +60,17 @@ class Tracked:
             previous corners that may serve as this pair's corners, or None: detect.
         counts: The previous pair's corner counts ``(left, right)``.
         alive: ``(left, right)`` (N,) int64: which detected corner each tracked one is.
+        lost: The previous pair had corners enough to track (``tracking.min_tracks`` in each
+            camera) and yet a camera's motion could not be fitted: this pair does not
+            continue the previous one (a cut, a saccade). False with a motion, and where
+            nothing was tried or there was too little to track.
     """
 
     motions: tuple[np.ndarray, np.ndarray] | None = None
     corners: tuple[np.ndarray, np.ndarray] | None = None
     counts: tuple[int, int] = (0, 0)
     alive: tuple[np.ndarray, np.ndarray] | None = None
+    lost: bool = False
 
 
 class FrameTracker:
@@ -103,7 +108,8 @@ class FrameTracker:
                 or cams[0].image.shape != left.image.shape):
             return Tracked()
         if cfg.reuse_pairs == 0 or config.features.kind == 'lines':
-            return Tracked(motions=_checked_motions(cams, left, right, config))
+            motions = _checked_motions(cams, left, right, config)
+            return Tracked(motions=motions, lost=motions is None and _trackable(cams, cfg))
         fits: list[CameraMotion] = []
         corners, alive = [], []
         for image, cam in zip((left, right), cams):
@@ -114,7 +120,7 @@ class FrameTracker:
             corners.append(target)
             alive.append(cam.alive[kept])
         if not (fits[0].ok and fits[1].ok):
-            return Tracked()
+            return Tracked(lost=_trackable(cams, cfg))
         motions = (motion_to_full(fits[0].homography, left.scale),
                    motion_to_full(fits[1].homography, right.scale))
         counts = (cams[0].points.shape[0], cams[1].points.shape[0])
@@ -152,6 +158,11 @@ class FrameTracker:
 def enough_carried(carried: Sequence[np.ndarray], counts: tuple[int, int]) -> bool:
     """Return True if the carried corners are enough to stand for a detection."""
     return all(c.shape[0] >= MIN_CARRIED_SHARE * n for c, n in zip(carried, counts))
+
+
+def _trackable(cams: tuple[_Camera, _Camera], cfg: TrackingConfig) -> bool:
+    """Return whether both cameras' previous pair had ``tracking.min_tracks`` corners to track."""
+    return all(min(cam.points.shape[0], cfg.max_points) >= cfg.min_tracks for cam in cams)
 
 
 def _checked_motions(cams: tuple[_Camera, _Camera], left: WorkingImage, right: WorkingImage,

@@ -29,7 +29,7 @@ from domplane_ros.stream.detection import (carried_features, detect_features, fu
                                            level_features)
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
-from domplane_ros.stream.motion import FrameTracker
+from domplane_ros.stream.motion import FrameTracker, Tracked
 from domplane_ros.stream.search import PlaneSearch, propagate
 from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import Verdict
@@ -42,6 +42,13 @@ __all__ = ['FrameResult', 'LOCKED', 'PipelineStats', 'PlanePipeline', 'SEARCHING
 LOCKED = 'locked'        # the last frame gave a plane; the next one warm-starts from it
 TRACKING = 'tracking'    # an estimate failed; the last plane is carried through the motion
 SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidates per frame
+
+# A locked (or tracking) pair whose previous pair cannot be tracked into it (a lost track,
+# _track_lost): True drops the lock and searches in this pair, False warm-starts from the lock
+# as before session 15. Measured (evaluate_trust cuts, tuning seeds 0-60, docs/BENCHMARKS.md
+# round 16): re-lock later than 3 pairs after 4 cuts -> 1 (22, whose true plane the gate
+# refuses), published 455 -> 475 of 488 pairs, correct 431 -> 457, wrong 0 -> 0.
+SEARCH_ON_LOST_TRACK = True
 
 # Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
 # for a first pass.
@@ -175,13 +182,16 @@ class PlanePipeline:
             return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
         work = (WorkingImage.of(left, cfg.features.max_width, cfg.features.max_megapixels),
                 WorkingImage.of(right, cfg.features.max_width, cfg.features.max_megapixels))
-        feats, track_pts, motions, carried, spans = self._features(*work)
+        feats, track_pts, tracked, carried, spans = self._features(*work)
+        motions = tracked.motions
         self.stats.carried += carried is not None
         t3 = time.perf_counter()
         # Every plane of this pair shares one shrink, from the working level.
         self._trust.begin_pair(left, right, (work[0].image, work[1].image, work[0].level))
         try:
-            step = self._estimate(PairStep(left=left, right=right), feats, motions, fast)
+            step = self._estimate(PairStep(left=left, right=right,
+                                           track_lost=self._track_lost(tracked, feats)),
+                                  feats, motions, fast)
         finally:
             self._trust.end_pair()
         t4 = time.perf_counter()
@@ -283,10 +293,9 @@ class PlanePipeline:
 
     # --- Features and temporal prediction ------------------------------------------------
     def _features(self, left: WorkingImage, right: WorkingImage
-                  ) -> tuple[Features, tuple[np.ndarray, np.ndarray],
-                             tuple[np.ndarray, np.ndarray] | None,
+                  ) -> tuple[Features, tuple[np.ndarray, np.ndarray], Tracked,
                              tuple[np.ndarray, np.ndarray] | None, tuple[float, float]]:
-        """Return the pair's features, working-level corners, the cameras' motions (or None).
+        """Return the pair's features, working-level corners, its view of the previous pair.
 
         Also, for corners carried from an earlier pair (:mod:`domplane_ros.stream.motion`),
         which detected corner each is (None: detected in this pair), and the seconds spent on
@@ -306,16 +315,33 @@ class PlanePipeline:
         if carried is not None:
             feats, corners, kept = carried
             alive = (tracked.alive[0][kept[0]], tracked.alive[1][kept[1]])
-            return feats, corners, tracked.motions, alive, (time.perf_counter() - t1, t1 - t0)
+            return feats, corners, tracked, alive, (time.perf_counter() - t1, t1 - t0)
         feats, corners = detect_features(left, right, self.config)
         corners = self._tracking_points(left, right, corners)
-        return feats, corners, tracked.motions, None, (time.perf_counter() - t1, t1 - t0)
+        return feats, corners, tracked, None, (time.perf_counter() - t1, t1 - t0)
+
+    def _track_lost(self, tracked: Tracked, feats: Features) -> bool:
+        """Return whether this pair does not continue the previous one (a cut).
+
+        The previous pair's corners could not be tracked into it (``tracked.lost``) although
+        it has corners enough to track (``tracking.min_tracks`` in each image): a blank or
+        textureless pair (a drop-out) says nothing, as in :meth:`_view_changed`.
+        """
+        least = self.config.tracking.min_tracks
+        return tracked.lost and min(feats.n_left, feats.n_right) >= least
 
     # --- Locked and tracking ---------------------------------------------------------------
     def _track_or_lock(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
                        size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None,
                        fast: bool) -> None:
         assert self._last_h is not None
+        if step.track_lost and SEARCH_ON_LOST_TRACK:
+            # The previous pair cannot be tracked into this one: the view jumped (a cut). The
+            # lock is no warm start here (it slid onto near planes of the new floor, 2.65 and
+            # 4.48 px off, and passed the gate): search in this pair.
+            step.reason = 'lost track: the previous pair cannot be tracked into this one'
+            self._start_search()
+            return
         prediction = propagate(self._last_h, motions)
         if prediction is not None and self._checks.bounds_reason(prediction, size, count=False):
             prediction = None

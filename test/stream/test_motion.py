@@ -12,8 +12,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import PlaneNodeConfig
+from domplane_ros.core.pyramid import WorkingImage
 from domplane_ros.sim.head import head_sequence, HeadMotion
+from domplane_ros.sim.rigs import cut_sequence
 from domplane_ros.sim.truth import floor_points, transfer_error_px
+from domplane_ros.stream.detection import detect_features
+from domplane_ros.stream.motion import FrameTracker
 from domplane_ros.stream.pipeline import LOCKED, PlanePipeline
 import numpy as np
 import pytest
@@ -92,3 +96,30 @@ def test_a_reset_detects_afresh(sequences):
     frame, _ = sequences[0][4]
     pipeline.process(frame.left, frame.right, 4 * STEP_NS, reset=True)
     assert pipeline.stats.carried == carried
+
+
+def _working(frame):
+    cfg = PlaneNodeConfig().features
+    return (WorkingImage.of(frame.left, cfg.max_width, cfg.max_megapixels),
+            WorkingImage.of(frame.right, cfg.max_width, cfg.max_megapixels))
+
+
+@pytest.mark.parametrize('reuse_pairs', [0, 4])
+def test_a_cut_is_a_lost_track_a_head_motion_is_not(sequences, reuse_pairs):
+    config = _config(reuse_pairs)
+    cut = cut_sequence(1, 1, 20)
+    for previous, current, lost in ((sequences[0][3][0], sequences[0][4][0], False),
+                                    (cut[0], cut[1], True)):
+        tracker = FrameTracker()
+        before = _working(previous)
+        corners = detect_features(*before, config)[1]
+        tracker.keep(*before, corners, None)
+        tracked = tracker.track(*_working(current), config, motion=True, carry=True)
+        assert tracked.lost == lost
+        assert (tracked.motions is None) == lost
+        # Too few corners to track (a faint floor's photometric lock): not lost, only unknown.
+        tracker = FrameTracker()
+        few = tuple(c[:config.tracking.min_tracks - 1] for c in corners)
+        tracker.keep(*before, few, None)
+        tracked = tracker.track(*_working(current), config, motion=True, carry=True)
+        assert not tracked.lost and tracked.motions is None
