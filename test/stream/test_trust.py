@@ -98,14 +98,20 @@ def test_a_lock_whose_score_collapses_is_refused(scene, monkeypatch):
 
 # 186: a cut to a scene of 9 corners (evaluate_trust tuning seed 186): the lock, refined
 # photometrically, gives no plane; carried as 'tracking' it re-locked after 4 pairs.
-@pytest.mark.parametrize('seed', [0, 1, 3, 186])
-def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
-    frames = cut_sequence(6, 6, seed)
+def _cut_run(before, after, seed):
+    """Return a fresh pipeline's results over a cut sequence and their errors (None: none)."""
+    frames = cut_sequence(before, after, seed)
     pipeline = PlanePipeline()
     results = [pipeline.process(f.left, f.right, i * PERIOD_NS) for i, f in enumerate(frames)]
     errors = [plane_error_px(f, r.homography) if r.ok else None
               for f, r in zip(frames, results)]
     assert all(e is None or e < 5.0 for e in errors), errors
+    return results, errors
+
+
+@pytest.mark.parametrize('seed', [0, 1, 3, 186])
+def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
+    results, errors = _cut_run(6, 6, seed)
     after = errors[6:]
     relock = next(i for i, e in enumerate(after) if e is not None and e < 1.0)
     assert relock < 3, errors
@@ -119,12 +125,7 @@ def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
 # is a cut: the search runs in the first pair after it (pipeline.SEARCH_ON_LOST_TRACK).
 @pytest.mark.parametrize('seed', [19, 60])
 def test_a_cut_that_breaks_the_track_searches_at_once(seed):
-    frames = cut_sequence(8, 8, seed)
-    pipeline = PlanePipeline()
-    results = [pipeline.process(f.left, f.right, i * PERIOD_NS) for i, f in enumerate(frames)]
-    errors = [plane_error_px(f, r.homography) if r.ok else None
-              for f, r in zip(frames, results)]
-    assert all(e is None or e < 5.0 for e in errors), errors
+    results, errors = _cut_run(8, 8, seed)
     assert results[8].reinitialised, results[8].warm_start  # the search ran in the first pair
     relock = next(i for i, e in enumerate(errors[8:]) if e is not None and e < 1.0)
     assert relock < 3, errors
