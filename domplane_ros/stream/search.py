@@ -288,10 +288,8 @@ class PlaneSearch:
         plane joins the pool only if verified and it passes the checks every pool plane passed
         (a valid homography, inliers spread over the region): its features were matched again.
         """
-        trust, cfg = self._trust(), self._config()
-        least = NEAR_MISS_RATIO * cfg.verification.min_score
-        judged = [(trust.judge(step.left, step.right, plane.homography, cfg.features.roi),
-                   plane) for plane in pool]
+        least = NEAR_MISS_RATIO * self._config().verification.min_score
+        judged = self._judged_pool(step, pool)
         # A plane refused for its disparity slope (swapped cameras, no ground plane) is no near
         # miss whatever its verification says: the refinement moves it a pixel or two, not to
         # a slope of the other sign, and would take a ground plane's slot.
@@ -315,6 +313,13 @@ class PlaneSearch:
                 added = True
         return added
 
+    def _judged_pool(self, step: PairStep, pool: list[PlaneEstimate]
+                     ) -> list[tuple[Verdict, PlaneEstimate]]:
+        """Return each pool plane's verdict on this pair, beside the plane."""
+        trust, roi = self._trust(), self._config().features.roi
+        return [(trust.judge(step.left, step.right, plane.homography, roi), plane)
+                for plane in pool]
+
     def _refine_contenders(self, step: PairStep, search: _Search, problem: TwoStep,
                            pool: list[PlaneEstimate], feats: Features,
                            size: tuple[int, int]) -> bool:
@@ -324,10 +329,8 @@ class PlaneSearch:
         among the search's rivals) scores within the margin of the best verified plane: a
         refined plane of this head could then outscore the swapped cameras' floor.
         """
-        trust, cfg = self._trust(), self._config()
-        roi = cfg.features.roi
-        judged = [(trust.judge(step.left, step.right, plane.homography, roi), plane)
-                  for plane in pool]
+        trust, roi = self._trust(), self._config().features.roi
+        judged = self._judged_pool(step, pool)
         top = max((v.score for v, _ in judged if v.accepted), default=0.0)
         least = top / CHALLENGE_MARGIN
         swapped = [v for v, _ in judged if v.swapped]
