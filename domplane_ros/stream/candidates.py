@@ -175,7 +175,7 @@ class CandidateWork:
         if not (again.accepted
                 and again.peak_score >= TIGHT_POLISH_MIN_PEAK * verdict.peak_score):
             return estimate, verdict
-        return self._moved(problem, estimate, polished), again
+        return self.moved(problem, estimate, polished), again
 
     def photometric(self, step: PairStep, problem: TwoStep, estimate: PlaneEstimate,
                     verdict: Verdict) -> tuple[PlaneEstimate, Verdict]:
@@ -193,7 +193,7 @@ class CandidateWork:
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
             if not (again.accepted and again.peak_score >= least):
                 break
-            moved = self._moved(problem, estimate, refined)
+            moved = self.moved(problem, estimate, refined)
             settled = _median_move(problem, estimate.homography, refined) < PHOTOMETRIC_SETTLED_PX
             estimate, verdict = moved, again
             if settled:
@@ -246,7 +246,7 @@ class CandidateWork:
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
             if again.verification.score <= verdict.verification.score:
                 break
-            estimate, verdict = self._moved(problem, estimate, refined), again
+            estimate, verdict = self.moved(problem, estimate, refined), again
             if verdict.accepted:
                 break
         return estimate, verdict
@@ -268,10 +268,10 @@ class CandidateWork:
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
             if again.verification.score <= verdict.verification.score:
                 break
-            estimate, verdict = self._moved(problem, estimate, refined), again
+            estimate, verdict = self.moved(problem, estimate, refined), again
         return estimate, verdict
 
-    def _moved(self, problem: TwoStep, estimate: PlaneEstimate, homography: np.ndarray
+    def moved(self, problem: TwoStep, estimate: PlaneEstimate, homography: np.ndarray
                ) -> PlaneEstimate:
         """Return the estimate at another homography, its features matched again."""
         n = problem.n_points

@@ -208,10 +208,12 @@ def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatc
         stamp += PERIOD_NS
     assert result.ok and plane_error_px(scene, result.homography) < 1.0
     # From now on the warm start is stuck 2 px off (as in a look-alike's basin): only the
-    # challenger can bring the lock back.
+    # challenger can bring the lock back. The warm pair's anchor (a tight fit of the good
+    # prediction, stream/pipeline.py WARM_ANCHOR) is stuck with it: it would bring it back too.
     worse = _shifted(scene.homography, 2.0)
     stuck = _estimate_at(scene, worse)
     monkeypatch.setattr(pipeline, '_warm_estimate', lambda *args: stuck)
+    monkeypatch.setattr(pipeline, '_anchored', lambda problem, init, estimate: estimate)
     errors, starts = [], []
     for _ in range(4):
         result = pipeline.process(scene.left, scene.right, stamp)
