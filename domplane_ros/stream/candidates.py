@@ -272,7 +272,7 @@ class CandidateWork:
         return estimate, verdict
 
     def moved(self, problem: TwoStep, estimate: PlaneEstimate, homography: np.ndarray
-               ) -> PlaneEstimate:
+              ) -> PlaneEstimate:
         """Return the estimate at another homography, its features matched again."""
         n = problem.n_points
         r, idx, _ = problem.match(problem.apply(homography))
