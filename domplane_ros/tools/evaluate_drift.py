@@ -168,14 +168,13 @@ def run_sequence(family: str, frames: list[StereoFrame], seed: int, detail: str,
     The sheet holds the left image with the mask of the first, the middle and the worst pair.
     """
     pipeline = PlanePipeline(config)
-    errors: list[float | None] = []
+    every: list[float | None] = []
     masks = []
     for index, frame in enumerate(frames):
         result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
-        error = plane_error_px(frame, result.homography) if result.ok else None
+        every.append(plane_error_px(frame, result.homography) if result.ok else None)
         masks.append(result.mask)
-        if index > 0:
-            errors.append(error)
+    errors = every[1:]
     run = Run(family, seed, detail, errors)
     if run.worst_px <= CORRECT_PX:
         return run, []
@@ -187,8 +186,7 @@ def run_sequence(family: str, frames: list[StereoFrame], seed: int, detail: str,
     sheet = []
     for label, index in (('first', 0), ('middle', len(frames) // 2),
                          ('worst', run.worst_pair)):
-        error = errors[index - 1] if index > 0 else None
-        text = '-' if error is None else f'{error:.2f} px'
+        text = '-' if every[index] is None else f'{every[index]:.2f} px'
         sheet.append((f'{family} {seed} {label} #{index}: {text}',
                       overlay(frames[index].left, masks[index])))
     return run, sheet
