@@ -225,11 +225,11 @@ def scene_sequence(n_frames: int, seed: int, width: int = 640, height: int = 480
             continue
         wobble = (tilt_jitter_deg * math.sin(_phase(i, n_frames) + phases[0]),
                   vergence_jitter_deg * math.sin(_phase(i, n_frames) + phases[1]))
-        frames[i] = (render_stereo(
+        frames[i] = render_stereo(
             _wobbled(nominal, *wobble), level_boxes(world_boxes, x, z, yaw), floor=floor,
             seed=int(seed), gain=gain, offset=offset, noise_std=noise_std,
             head_pose=_texture_pose(origin, heading0, x, z, yaw), background=background,
-            blur_sigma=blur_sigma, noise_seed=int(seed) * 100003 + i))
+            blur_sigma=blur_sigma, noise_seed=int(seed) * 100003 + i)
     return [frames[i] for i in (range(n_frames) if wanted is None else wanted)]
 
 
