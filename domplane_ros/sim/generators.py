@@ -171,8 +171,8 @@ def scene_sequence(n_frames: int, seed: int, width: int = 640, height: int = 480
                    yaw_rate_deg: float = 0.6, tilt_jitter_deg: float = 1.0,
                    vergence_jitter_deg: float = 0.3, gain: float = 1.0, offset: float = 0.0,
                    noise_std: float = 1.0, background: str = 'horizon',
-                   setup: CameraSetup | None = None, blur_sigma: float = 0.5
-                   ) -> list[StereoFrame]:
+                   setup: CameraSetup | None = None, blur_sigma: float = 0.5,
+                   only: Sequence[int] | None = None) -> list[StereoFrame]:
     """Render a short sequence of a head walking over the floor past fixed boxes.
 
     The head moves ``step`` per frame along its heading, which turns slowly (a sine of
@@ -197,16 +197,20 @@ def scene_sequence(n_frames: int, seed: int, width: int = 640, height: int = 480
         background: ``'horizon'`` or ``'wall'``.
         setup: The nominal set-up (default: a random one).
         blur_sigma: Gaussian blur of both images in pixels.
+        only: Render only these frame indices (each as in the whole sequence), in order.
 
     Returns:
-        ``n_frames`` :class:`StereoFrame` values.
+        ``n_frames`` :class:`StereoFrame` values (those of ``only`` if given).
 
     Raises:
-        ValueError: If ``n_frames < 1``.
+        ValueError: If ``n_frames < 1`` or an index of ``only`` is not below it.
 
     """
     if n_frames < 1:
         raise ValueError(f'n_frames must be >= 1, got {n_frames}')
+    wanted = None if only is None else [int(i) for i in only]
+    if wanted is not None and not all(0 <= i < n_frames for i in wanted):
+        raise ValueError(f'only must hold indices in [0, {n_frames}), got {only!r}')
     rng = np.random.default_rng((int(seed), 777))
     nominal = _inside_prior(setup or random_setup(rng, width, height), tilt_jitter_deg,
                             vergence_jitter_deg)
@@ -215,16 +219,18 @@ def scene_sequence(n_frames: int, seed: int, width: int = 640, height: int = 480
     origin = np.array([rng.uniform(0, 100), rng.uniform(0, 100)])
     heading0 = float(rng.uniform(0, 360))
     phases = rng.uniform(0, 2 * np.pi, 3)
-    frames = []
+    frames = {}
     for i, (x, z, yaw) in enumerate(_walk(n_frames, step, yaw_rate_deg, phases[2])):
+        if wanted is not None and i not in wanted:
+            continue
         wobble = (tilt_jitter_deg * math.sin(_phase(i, n_frames) + phases[0]),
                   vergence_jitter_deg * math.sin(_phase(i, n_frames) + phases[1]))
-        frames.append(render_stereo(
+        frames[i] = render_stereo(
             _wobbled(nominal, *wobble), level_boxes(world_boxes, x, z, yaw), floor=floor,
             seed=int(seed), gain=gain, offset=offset, noise_std=noise_std,
             head_pose=_texture_pose(origin, heading0, x, z, yaw), background=background,
-            blur_sigma=blur_sigma, noise_seed=int(seed) * 100003 + i))
-    return frames
+            blur_sigma=blur_sigma, noise_seed=int(seed) * 100003 + i)
+    return [frames[i] for i in (range(n_frames) if wanted is None else wanted)]
 
 
 def _phase(index: int, n_frames: int) -> float:
