@@ -228,6 +228,37 @@ def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatc
         assert 'challenger' not in starts and min(errors) > 1.5, (starts, errors)
 
 
+@pytest.mark.parametrize('period', [3, 0])
+def test_the_challenger_replaces_a_stuck_lock_that_the_anchor_holds(scene, monkeypatch, period):
+    # As above, with the warm pair's anchor on: the lock itself is stuck 2 px off (so is the
+    # prediction, the anchor's start), as in a look-alike's basin. The anchor's tight fit of
+    # that start holds it; the challenger must still bring the lock back.
+    settings = replace(LOW_GATE, challenge_period=period)
+    pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
+    stamp = 0
+    for _ in range(3):
+        result = pipeline.process(scene.left, scene.right, stamp)
+        stamp += PERIOD_NS
+    assert result.ok and plane_error_px(scene, result.homography) < 1.0
+    worse = _shifted(scene.homography, 2.0)
+    stuck = _estimate_at(scene, worse)
+    monkeypatch.setattr(pipeline, '_warm_estimate', lambda *args: stuck)
+    pipeline._last_h = worse.copy()
+    errors, starts = [], []
+    for _ in range(4):
+        result = pipeline.process(scene.left, scene.right, stamp)
+        stamp += PERIOD_NS
+        assert result.ok
+        errors.append(plane_error_px(scene, result.homography))
+        starts.append(result.warm_start)
+    # The anchor holds the stuck lock until the challenge (it brings nothing back by itself).
+    assert errors[0] > 1.5, (starts, errors)
+    if period:
+        assert 'challenger' in starts and errors[-1] < 1.0, (starts, errors)
+    else:
+        assert 'challenger' not in starts and min(errors) > 1.5, (starts, errors)
+
+
 def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
     settings = replace(LOW_GATE, challenge_period=3)
     pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
