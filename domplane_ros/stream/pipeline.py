@@ -595,13 +595,22 @@ class PlanePipeline:
 
         See :data:`WARM_ANCHOR`: ``init`` (the prediction or the last plane) is polished on
         its features within :data:`WARM_ANCHOR_RATIO` x ``estimator.threshold_px`` and
-        replaces ``estimate`` when its truncated energy at that scale is lower.
+        replaces ``estimate`` when its truncated energy at that scale is lower; not when
+        fewer than ``estimator.min_inliers`` features lie within that band of ``init`` (there
+        is nothing to fit it to). The replacement keeps the warm estimate's ``final_energy``:
+        the lock's energy check compares the estimator's energies, as before the anchor.
         """
         if not WARM_ANCHOR or isinstance(problem, FailedEstimate) or not estimate.ok:
             return estimate
         tight = WARM_ANCHOR_RATIO * self.config.estimator.threshold_px
         pred = problem.apply(init)
-        polished, _, _ = problem.polish(init, tight, (pred, *problem.match(pred, tight)))
+        matched = problem.match(pred, tight)
+        if np.count_nonzero(matched[0] < tight) < self.config.estimator.min_inliers:
+            # Too few features near the start to fit it to this pair: polish would hand the
+            # start back unfitted (review17: faint 2.56 m tiles seed 62, pair 5, 6 features in
+            # the band, the bare prediction published 1.54 px off).
+            return estimate
+        polished, _, _ = problem.polish(init, tight, (pred, *matched))
         if check_homography(polished):
             return estimate
         polished = normalise_scale(polished)
