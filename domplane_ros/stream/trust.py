@@ -85,7 +85,7 @@ MAX_BELOW_FRACTION = 0.03
 # floor (:func:`weak_below_refusal`). Not during the pick: an unfinished plane near the floor
 # can leave more beyond it (measured: 0.017 at confidence 0.71, floors_rough tuning seed 25,
 # 0.04 px off once finished). Measured on the published planes of the tuning seeds 0-29 (cold,
-# rough, floors, floors_rough; 120 published, all correct) and the cold search on every frame
+# rough, floors, floors_rough; 118 published, none wrong) and the cold search on every frame
 # of the rough sequence 41 (docs/BENCHMARKS.md round 17): correct planes at most 0.0093
 # (confidence 1) and 0.0074 at confidence 0.69; planes 4.6-5.3 px off through the faces of
 # boxes and the far floor on that rough head (roll +3.7 deg) 0.018-0.024 at confidence
