@@ -29,7 +29,7 @@ from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.swap import swap_rivals
-from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.trust import TrustGate, weak_below_refusal
 from domplane_ros.stream.verdict import BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, Verdict
 import numpy as np
 
@@ -77,6 +77,10 @@ CONTENDERS = 6
 REFINE_CONTENDERS = True
 # The reason of a pick ambiguous between planes of this head (Uniqueness.ground_winner).
 AMBIGUOUS_DISTINCT = 'ambiguous: a distinct plane'
+# Refuse a finished winner verified with less than full confidence that leaves more than
+# trust.MAX_BELOW_FRACTION_WEAK of the texture beyond it (trust.weak_below_refusal; measured
+# there and in docs/BENCHMARKS.md round 17). False: as before round 17.
+WEAK_BELOW_REFUSAL = True
 
 __all__ = ['PlaneSearch', 'propagate']
 
@@ -183,7 +187,7 @@ class PlaneSearch:
         if reason or isinstance(problem, FailedEstimate):
             step.reason = reason or problem.reason
             best, verdict, _ = self._photometric_search(step, size)
-            refused = '' if verdict is None else _beyond_refusal(verdict)
+            refused = '' if verdict is None else _finish_refusal(verdict)
             if refused:
                 step.reason = refused
                 return None
@@ -231,7 +235,7 @@ class PlaneSearch:
             if best is step.initial:
                 step.warm_start = 'initial'
             done = self._work().finished(step, problem, feats, size, best, verdict)
-            unverified = _beyond_refusal(done[1])
+            unverified = _finish_refusal(done[1])
             if not unverified:
                 return self._done(*done)
             search.best = None
@@ -472,6 +476,16 @@ class PlaneSearch:
         else:
             step.reason = 'prior search found no plane'
         self._search = None
+
+
+def _finish_refusal(verdict: Verdict) -> str:
+    """Return why a finished winner is refused ('' if not): beyond it, or weak evidence.
+
+    :func:`_beyond_refusal`, then :func:`~domplane_ros.stream.trust.weak_below_refusal` (only
+    if :data:`WEAK_BELOW_REFUSAL`).
+    """
+    return _beyond_refusal(verdict) or (weak_below_refusal(verdict) if WEAK_BELOW_REFUSAL
+                                        else '')
 
 
 def _beyond_refusal(verdict: Verdict) -> str:

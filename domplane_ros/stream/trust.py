@@ -79,6 +79,18 @@ MIN_BOTTOM_SHARE = 0.25
 # 6-7 px off through the faces of boxes on faint tiled floors (tuning seeds 188, 305) 0.047
 # and 0.052.
 MAX_BELOW_FRACTION = 0.03
+# A search's finished winner (after its polish and photometric refinement) verified with less
+# than full confidence (its score under verification.accept_score) may have at most this share:
+# weak evidence for the plane and texture beyond it make a plane through obstacles, not the
+# floor (:func:`weak_below_refusal`). Not during the pick: an unfinished plane near the floor
+# can leave more beyond it (measured: 0.017 at confidence 0.71, floors_rough tuning seed 25,
+# 0.04 px off once finished). Measured on the published planes of the tuning seeds 0-29 (cold,
+# rough, floors, floors_rough; 118 published, none wrong) and the cold search on every frame
+# of the rough sequence 41 (docs/BENCHMARKS.md round 17): correct planes at most 0.0093
+# (confidence 1) and 0.0074 at confidence 0.69; planes 4.6-5.3 px off through the faces of
+# boxes and the far floor on that rough head (roll +3.7 deg) 0.018-0.024 at confidence
+# 0.50-0.75.
+MAX_BELOW_FRACTION_WEAK = 0.015
 # A published plane that explains at least MIN_OUTER_BAND_SCORE of both the top and the bottom
 # third of the region (PlaneVerification.top_score, bottom_score) must explain at least
 # MIN_MIDDLE_SHARE of the weaker of the two in the band between (middle_score), where that band
@@ -533,3 +545,18 @@ def own_region_verified(check: PlaneVerification) -> bool:
     """
     return (check.reason == REASON_LOW_SUPPORT and check.region_score >= MIN_REGION_SCORE
             and check.region_fraction >= MIN_REGION_FRACTION)
+
+
+def weak_below_refusal(verdict: Verdict) -> str:
+    """Return why a search's finished winner is refused for weak evidence ('' if not).
+
+    Refused: verified with less than full confidence and more than
+    :data:`MAX_BELOW_FRACTION_WEAK` of the textured image beyond it.
+    """
+    check = verdict.verification
+    if check.confidence >= 1.0 or check.below_fraction <= MAX_BELOW_FRACTION_WEAK:
+        return ''
+    return (f'not the ground: {100 * check.below_fraction:.1f} % of the textured image lies '
+            f'beyond the best plane finished (> {100 * MAX_BELOW_FRACTION_WEAK:.1f} % at '
+            f'confidence {check.confidence:.2f} < 1); a plane through obstacles above the '
+            'floor?')

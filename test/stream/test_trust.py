@@ -468,6 +468,9 @@ def test_the_refinement_keeps_97_percent_of_the_peak_and_runs_twice(monkeypatch,
     result = PlanePipeline().process(frame.left, frame.right, 0)
     assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
     monkeypatch.setattr(candidates_module, name, value)
+    # Round 17's refusal of a weak finished winner with texture beyond it refuses rough 59's
+    # plane refined once (1.17 px off): off here, so the refinement alone is what is tested.
+    monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
     without = PlanePipeline().process(frame.left, frame.right, 0)
     assert without.ok and plane_error_px(frame, without.homography) > 1.1
 

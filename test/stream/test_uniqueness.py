@@ -33,7 +33,12 @@ def _run(frame):
 
 
 def _wrong_without(frame, monkeypatch, *patches):
-    """Run the frame with each ``(module, name, value)`` patched: a wrong plane is published."""
+    """Run the frame with each ``(module, name, value)`` patched: a wrong plane is published.
+
+    Round 17's refusal of a weak finished winner with texture beyond it is off too: it also
+    refuses some of these planes, and the patched rule alone is what is tested.
+    """
+    monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
     for module, name, value in patches:
         monkeypatch.setattr(module, name, value)
     without = _run(frame)
@@ -359,6 +364,7 @@ def test_a_better_fit_with_texture_beyond_it_makes_the_winner_ambiguous(monkeypa
     result = PlanePipeline(config).process(frame.left, frame.right, 0)
     assert not result.ok and 'texture beyond it' in result.reason, result.reason
     monkeypatch.setattr(uniqueness_module, 'BEYOND_RIVAL_SHARE', math.inf)
+    monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)  # round 17's refusal
     without = PlanePipeline(config).process(frame.left, frame.right, 0)
     assert without.ok and plane_error_px(frame, without.homography) > 5.0
 
