@@ -198,8 +198,9 @@ def test_pick_ranks_verified_planes_by_score_in_any_order(scene):
         assert plane_error_px(scene, best.homography) < 0.5, order
 
 
+@pytest.mark.parametrize('held', ['warm estimate', 'anchor'])
 @pytest.mark.parametrize('period', [3, 0])
-def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatch, period):
+def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatch, period, held):
     settings = replace(LOW_GATE, challenge_period=period)
     pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
     stamp = 0
@@ -208,12 +209,17 @@ def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatc
         stamp += PERIOD_NS
     assert result.ok and plane_error_px(scene, result.homography) < 1.0
     # From now on the warm start is stuck 2 px off (as in a look-alike's basin): only the
-    # challenger can bring the lock back. The warm pair's anchor (a tight fit of the good
-    # prediction, stream/pipeline.py WARM_ANCHOR) is stuck with it: it would bring it back too.
+    # challenger can bring the lock back. 'warm estimate': the warm pair's anchor (a tight fit
+    # of the good prediction, stream/pipeline.py WARM_ANCHOR) is off, else it would bring it
+    # back. 'anchor': the lock itself is stuck (so is the prediction, the anchor's start) and
+    # the anchor's tight fit of it holds it until the challenge.
     worse = _shifted(scene.homography, 2.0)
     stuck = _estimate_at(scene, worse)
     monkeypatch.setattr(pipeline, '_warm_estimate', lambda *args: stuck)
-    monkeypatch.setattr(pipeline, '_anchored', lambda problem, init, estimate: estimate)
+    if held == 'anchor':
+        pipeline._last_h = worse.copy()
+    else:
+        monkeypatch.setattr(pipeline, '_anchored', lambda problem, init, estimate: estimate)
     errors, starts = [], []
     for _ in range(4):
         result = pipeline.process(scene.left, scene.right, stamp)
@@ -221,41 +227,11 @@ def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatc
         assert result.ok
         errors.append(plane_error_px(scene, result.homography))
         starts.append(result.warm_start)
+    assert errors[0] > 1.5, (starts, errors)
     if period:
         assert 'challenger' in starts and min(errors) < 1.0, (starts, errors)
     else:
         # Fails if the challenger runs although it is switched off.
-        assert 'challenger' not in starts and min(errors) > 1.5, (starts, errors)
-
-
-@pytest.mark.parametrize('period', [3, 0])
-def test_the_challenger_replaces_a_stuck_lock_that_the_anchor_holds(scene, monkeypatch, period):
-    # As above, with the warm pair's anchor on: the lock itself is stuck 2 px off (so is the
-    # prediction, the anchor's start), as in a look-alike's basin. The anchor's tight fit of
-    # that start holds it; the challenger must still bring the lock back.
-    settings = replace(LOW_GATE, challenge_period=period)
-    pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
-    stamp = 0
-    for _ in range(3):
-        result = pipeline.process(scene.left, scene.right, stamp)
-        stamp += PERIOD_NS
-    assert result.ok and plane_error_px(scene, result.homography) < 1.0
-    worse = _shifted(scene.homography, 2.0)
-    stuck = _estimate_at(scene, worse)
-    monkeypatch.setattr(pipeline, '_warm_estimate', lambda *args: stuck)
-    pipeline._last_h = worse.copy()
-    errors, starts = [], []
-    for _ in range(4):
-        result = pipeline.process(scene.left, scene.right, stamp)
-        stamp += PERIOD_NS
-        assert result.ok
-        errors.append(plane_error_px(scene, result.homography))
-        starts.append(result.warm_start)
-    # The anchor holds the stuck lock until the challenge (it brings nothing back by itself).
-    assert errors[0] > 1.5, (starts, errors)
-    if period:
-        assert 'challenger' in starts and errors[-1] < 1.0, (starts, errors)
-    else:
         assert 'challenger' not in starts and min(errors) > 1.5, (starts, errors)
 
 
