@@ -9,14 +9,13 @@ stream's bookkeeping (pair counters, input-problem counts, the status) lives in
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 import math
 import time
 
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.core.estimator import can_widen, GRADUATED, TwoStep
+from domplane_ros.core.estimator import can_widen, TwoStep
 from domplane_ros.core.features import detect_corners, Features
-from domplane_ros.core.homography import check_homography, normalise_scale
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.pyramid import level_homography, WorkingImage
@@ -34,6 +33,7 @@ from domplane_ros.stream.motion import FrameTracker, Tracked
 from domplane_ros.stream.search import PlaneSearch, propagate
 from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import Verdict
+from domplane_ros.stream.warm import WarmFit
 import numpy as np
 
 __all__ = ['FrameResult', 'LOCKED', 'PipelineStats', 'PlanePipeline', 'SEARCHING', 'TRACKING',
@@ -50,34 +50,6 @@ SEARCHING = 'searching'  # no warm start: the prior search runs, a few candidate
 # round 16): re-lock later than 3 pairs after 4 cuts -> 1 (22, whose true plane the gate
 # refuses), published 455 -> 475 of 488 pairs, correct 431 -> 457, wrong 0 -> 0.
 SEARCH_ON_LOST_TRACK = True
-
-# Wide warm-start basin (fast head, no prediction): the robust threshold is widened this much
-# for a first pass.
-_WIDE_BASIN_FACTOR = 4.0
-
-# The warm pair's anchor (PlanePipeline._anchored): the warm start is also polished on its
-# closest features within this fraction of ``estimator.threshold_px`` (0.9 px by default), and
-# that plane replaces the warm estimate when it explains the features better at that scale
-# (the truncated energy sum min(d, t)^2 at the same t). The warm estimate's wide inlier band
-# (3 px) takes in the boxes' corners and the neighbours of a checker's corners, so its minimum
-# lies off the floor (measured, scene_sequence(16, seed=41), a 1.2 m checker: from the true
-# plane it converges 0.6-1.8 px off; from its own last plane, carried by the prediction, it
-# drifts 0.4-1 px a pair up to 5.2 px, docs/BENCHMARKS.md round 17), while the tight fit of a
-# good prediction stays on the floor (0.38 -> 0.11 px). A prediction several pixels off (a
-# fast head) gathers few features within the tight band: the warm estimate keeps its place.
-# False: the warm estimate as before session 16.
-WARM_ANCHOR = True
-WARM_ANCHOR_RATIO = 0.3
-
-# The widened warm retry (a warm pair whose plain estimate was refused) is published only if
-# the gate scores it (peak score) above the warm start it came from; else the warm start, if
-# the gate accepts it, is published. Measured (scene_sequence(48, seed=39), a planks floor
-# whose near field has few corners): from a prediction 0.16 px off, the plain estimate slid
-# to 1.87 px (refused: 9 % of the bottom) and the widened retry to 6.22 px along the planks
-# (accepted, peak 0.46; the truth's 0.62): the prediction, accepted with a higher score, is
-# published instead (docs/BENCHMARKS.md round 17, a lock's one-pair jump). False: the widened
-# estimate as before session 16.
-WIDENED_BEATS_START = True
 
 
 @dataclass
@@ -125,10 +97,11 @@ class PlanePipeline:
         self._tracking_frames = 0
         self._photometric = False  # the lock is a plane of too few corners (photometric)
         self._searcher = PlaneSearch(lambda: self.config, lambda: self._trust, self._checks,
-                                     self.counts, lambda *args: self._warm_estimate(*args))
+                                     self.counts, lambda *args: self._warm.estimate(*args))
         self._tracker = FrameTracker()
         self._challenge: Challenge | None = None
         self._trust = TrustGate(self.config.verification)
+        self._warm = WarmFit(lambda: self.config, lambda: self._trust, self._work)
 
     @property
     def last_homography(self) -> np.ndarray | None:
@@ -384,17 +357,17 @@ class PlanePipeline:
             tries = (False, True) if can_widen(self.config.estimator) else (False,)
             outcomes = []
             for widen in tries:
-                estimate = self._warm_estimate(problem, init, fast and prediction is None,
-                                               widen)
+                estimate = self._warm.estimate(problem, init,
+                                               fast and prediction is None, widen)
                 if not widen:
-                    estimate = self._anchored(problem, init, estimate)
+                    estimate = self._warm.anchored(problem, init, estimate)
                 outcomes.append((estimate, *self._warm_check(step, estimate, feats, size,
                                                              fast, count=not widen)))
                 if not outcomes[-1][1]:
                     break
             estimate, reason, verdict = outcomes[-1] if not outcomes[-1][1] else outcomes[0]
             if len(outcomes) > 1 and not reason:
-                estimate, verdict = self._kept_start(step, problem, init, estimate, verdict)
+                estimate, verdict = self._warm.kept_start(step, problem, init, estimate, verdict)
             step.estimate, step.warm_start = estimate, name
             if verdict is not None and not verdict.accepted:
                 # A verified lock does not slide into a look-alike: search at once.
@@ -473,22 +446,6 @@ class PlanePipeline:
         verdict = self._trust.judge(step.left, step.right, estimate.homography,
                                     self.config.features.roi, locked=True)
         return verdict.reason, verdict
-
-    def _kept_start(self, step: PairStep, problem: TwoStep | FailedEstimate, init: np.ndarray,
-                    widened: PlaneEstimate, verdict: Verdict) -> tuple[PlaneEstimate, Verdict]:
-        """Return the widened warm estimate, or the warm start where that explains more.
-
-        See :data:`WIDENED_BEATS_START`: the warm start (``init``) is verified too and replaces
-        the widened estimate (``widened``, verified as ``verdict``) when the gate accepts it
-        with a higher peak score.
-        """
-        if not WIDENED_BEATS_START or isinstance(problem, FailedEstimate):
-            return widened, verdict
-        start = self._trust.judge(step.left, step.right, init, self.config.features.roi,
-                                  locked=True)
-        if not (start.accepted and start.peak_score > verdict.peak_score):
-            return widened, verdict
-        return self._work().moved(problem, widened, init), start
 
     def _verified(self, step: PairStep, estimate: PlaneEstimate, verdict: Verdict) -> None:
         """Publish a verified plane: lock on it."""
@@ -570,54 +527,6 @@ class PlanePipeline:
                 step.keep_previous = True
             return
         self._start_search()
-
-    def _warm_estimate(self, problem: TwoStep | FailedEstimate, init: np.ndarray,
-                       wide: bool, widen: bool = False) -> PlaneEstimate | FailedEstimate:
-        if isinstance(problem, FailedEstimate):
-            return problem
-        cfg = self.config
-        warm = cfg.estimator
-        if warm.potential in GRADUATED:
-            warm = replace(warm, gnc_start_px=min(warm.gnc_start_px,
-                                                  cfg.pipeline.warm_gnc_start_px))
-        if wide:
-            # Fast head and no prediction: a first pass with a wide basin.
-            wide_options = replace(cfg.estimator, threshold_px=min(
-                200.0, _WIDE_BASIN_FACTOR * cfg.estimator.threshold_px))
-            first = problem.estimate(init, wide_options, widen=False)
-            if first.ok:
-                init = first.homography
-        return problem.estimate(init, warm, widen=widen)
-
-    def _anchored(self, problem: TwoStep | FailedEstimate, init: np.ndarray,
-                  estimate: PlaneEstimate | FailedEstimate) -> PlaneEstimate | FailedEstimate:
-        """Return the warm estimate, or the warm start's tight fit where that fits better.
-
-        See :data:`WARM_ANCHOR`: ``init`` (the prediction or the last plane) is polished on
-        its features within :data:`WARM_ANCHOR_RATIO` x ``estimator.threshold_px`` and
-        replaces ``estimate`` when its truncated energy at that scale is lower; not when
-        fewer than ``estimator.min_inliers`` features lie within that band of ``init`` (there
-        is nothing to fit it to). The replacement keeps the warm estimate's ``final_energy``:
-        the lock's energy check compares the estimator's energies, as before the anchor.
-        """
-        if not WARM_ANCHOR or isinstance(problem, FailedEstimate) or not estimate.ok:
-            return estimate
-        tight = WARM_ANCHOR_RATIO * self.config.estimator.threshold_px
-        pred = problem.apply(init)
-        matched = problem.match(pred, tight)
-        if np.count_nonzero(matched[0] < tight) < self.config.estimator.min_inliers:
-            # Too few features near the start to fit it to this pair: polish would hand the
-            # start back unfitted (review17: faint 2.56 m tiles seed 62, pair 5, 6 features in
-            # the band, the bare prediction published 1.54 px off).
-            return estimate
-        polished, _, _ = problem.polish(init, tight, (pred, *matched))
-        if check_homography(polished):
-            return estimate
-        polished = normalise_scale(polished)
-        energies = problem.screening_energy(np.stack([estimate.homography, polished]), tight)
-        if not energies[1] < energies[0]:
-            return estimate
-        return self._work().moved(problem, estimate, polished)
 
     def _problem(self, feats: Features) -> TwoStep | FailedEstimate:
         """Return the two-step iteration over this frame's features, or why there is none."""

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from domplane_ros.sim.generators import scene_sequence
 from domplane_ros.sim.rigs import plane_error_px
-from domplane_ros.stream import pipeline as pipeline_module
+from domplane_ros.stream import warm as warm_module
 from domplane_ros.stream.pipeline import PlanePipeline
 import pytest
 
@@ -37,7 +37,7 @@ def test_a_lock_on_a_checker_with_boxes_does_not_drift_off_the_floor(walk, monke
     assert len(published) >= 5, errors
     assert max(published) < 1.0, errors
     # Without the anchor, the same warm pairs drift: the test fails when it is switched off.
-    monkeypatch.setattr(pipeline_module, 'WARM_ANCHOR', False)
+    monkeypatch.setattr(warm_module, 'WARM_ANCHOR', False)
     drifted = [e for e in _errors(walk) if e is not None]
     assert max(drifted) > 2.0, drifted
 
@@ -56,7 +56,7 @@ def test_a_widened_warm_estimate_does_not_replace_a_better_warm_start(planks, mo
     assert None not in errors, errors
     assert max(errors) < 1.0, errors
     # Without the comparison with the warm start, pair 29 publishes the widened plane.
-    monkeypatch.setattr(pipeline_module, 'WIDENED_BEATS_START', False)
+    monkeypatch.setattr(warm_module, 'WIDENED_BEATS_START', False)
     jumped = _errors(planks)
     assert jumped[1] is not None and jumped[1] > 5.0, jumped
 
@@ -86,6 +86,6 @@ def test_the_anchor_does_not_publish_an_unfitted_prediction(faint_walk, monkeypa
     # an unfitted start may replace the warm estimate.
     errors = _errors(faint_walk)
     assert errors[5] is None or errors[5] < 1.0, errors
-    monkeypatch.setattr(pipeline_module, 'WARM_ANCHOR', False)
+    monkeypatch.setattr(warm_module, 'WARM_ANCHOR', False)
     off = _errors(faint_walk)
     assert off[5] is not None and off[5] < 1.0, off

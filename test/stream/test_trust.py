@@ -210,16 +210,16 @@ def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatc
     assert result.ok and plane_error_px(scene, result.homography) < 1.0
     # From now on the warm start is stuck 2 px off (as in a look-alike's basin): only the
     # challenger can bring the lock back. 'warm estimate': the warm pair's anchor (a tight fit
-    # of the good prediction, stream/pipeline.py WARM_ANCHOR) is off, else it would bring it
+    # of the good prediction, stream/warm.py WARM_ANCHOR) is off, else it would bring it
     # back. 'anchor': the lock itself is stuck (so is the prediction, the anchor's start) and
     # the anchor's tight fit of it holds it until the challenge.
     worse = _shifted(scene.homography, 2.0)
     stuck = _estimate_at(scene, worse)
-    monkeypatch.setattr(pipeline, '_warm_estimate', lambda *args: stuck)
+    monkeypatch.setattr(pipeline._warm, 'estimate', lambda *args: stuck)
     if held == 'anchor':
         pipeline._last_h = worse.copy()
     else:
-        monkeypatch.setattr(pipeline, '_anchored', lambda problem, init, estimate: estimate)
+        monkeypatch.setattr(pipeline._warm, 'anchored', lambda problem, init, estimate: estimate)
     errors, starts = [], []
     for _ in range(4):
         result = pipeline.process(scene.left, scene.right, stamp)
