@@ -108,12 +108,15 @@ class PixelDecision:
         rising: (h, w) bool plane pixels whose measured parallax is at least
             :data:`_RISE_SHARE` of the threshold (:data:`_TRUE_SCALE_RISE_SHARE` with
             ``_NOISE_AWARE``): nearer than the plane, like the bottom of an obstacle.
+        plain: (h, w) bool pixels inside the right image whose left window has less texture
+            than ``config.min_texture`` (not measured: what the fill of plain regions fills).
     """
 
     labels: np.ndarray
     parallax: np.ndarray
     decidable: np.ndarray
     rising: np.ndarray
+    plain: np.ndarray
 
 
 def decide_pixels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse: np.ndarray,
@@ -138,6 +141,7 @@ def decide_pixels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coars
     """
     fit = local_fit(left, warped, int(config.window_px), coarse, _NOISE_AWARE, valid)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
+    plain = valid & ~measurable
     matched = None
     if _MEASUREMENT == 'one_step':
         beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
@@ -151,7 +155,8 @@ def decide_pixels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coars
     share = _TRUE_SCALE_RISE_SHARE if _NOISE_AWARE else _RISE_SHARE
     rise_px = share * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
-    return PixelDecision(labels=labels, parallax=parallax, decidable=decidable, rising=rising)
+    return PixelDecision(labels=labels, parallax=parallax, decidable=decidable, rising=rising,
+                         plain=plain)
 
 
 def _matcher_fit(left: np.ndarray, warped: np.ndarray, fit: LocalFit
