@@ -221,7 +221,8 @@ def _classify(fit: LocalFit, measurable: np.ndarray, small: np.ndarray, shift_in
     if unsure is not None:  # the judged plane may lie at or above the threshold
         off &= ~unsure & ~plane
     # Otherwise no off pixel is plane: plane needs a parallax below the threshold and the
-    # zero-shift correlation (at least config.ncc_threshold, above _REJECT_NCC).
+    # zero-shift correlation config.ncc_threshold, which its range keeps at or above
+    # _REJECT_NCC (parameters.py).
     off &= measurable & (shift_inf > 0)
     off &= decidable | (residual >= _FAR_FACTOR * threshold)
     residual += shift_inf
