@@ -80,6 +80,10 @@ _FILL_MIN_OUTLINE = 4
 # with plain box faces in the tuning scenes).
 _FILL_FLAT_SHARE = 0.85
 _FILL_MOVED_SHARE = 0.1
+# The regions are found on every second pixel: a plain fillable pixel whose own sample is not
+# fillable (a region's edge between the samples) is filled when a filled pixel lies within
+# this many pixels (docs/MASK.md round 13; 0: not at all).
+_FILL_EDGE_PX = 1
 # A pixel is inside the right image when it maps this many working pixels inside its border,
 # so that every full-resolution pixel a working pixel covers maps inside too.
 _INSIDE_MARGIN_PX = 1.0
@@ -130,13 +134,18 @@ def _resize(image: np.ndarray, scale: float) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray,
-                   flat: tuple[np.ndarray, float] | None = None) -> None:
+                   flat: tuple[np.ndarray, float] | None = None,
+                   plain: np.ndarray | None = None) -> None:
     """Label as plane, in place, fillable regions whose outline is (almost) all plane.
 
     Only the outline inside the right image counts (the image border and pixels the right
     camera does not see neither support nor oppose the fill), and it must have at least
     :data:`_FILL_MIN_OUTLINE` pixels. The regions are found on every second pixel (plain
-    regions worth filling are large), and only fillable pixels change. A region whose outline
+    regions worth filling are large), and only fillable pixels change; a plain fillable pixel
+    whose own sample (the even row and column at or before it) is not fillable, the edge of
+    a region that the samples miss, is filled when a filled pixel lies within
+    :data:`_FILL_EDGE_PX` (docs/MASK.md round 13: a line one pixel wide along many filled
+    tiles' edges). A region whose outline
     is at least :data:`_FILL_FLAT_SHARE` plane (a plain tile beside a box's bottom) is filled
     too when the coarse flow inside it stays below the threshold on all but
     :data:`_FILL_MOVED_SHARE` of it: the flow fills an untextured region from its edges, so
@@ -148,6 +157,8 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray,
         valid: (h, w) bool, pixels inside the right image.
         flat: ``(flow, threshold)``: the (ceil(h/2), ceil(w/2)) float32 coarse flow at every
             second pixel and the threshold in its units, or None for the outline rule only.
+        plain: (h, w) bool pixels without texture (:class:`PixelDecision`'s ``plain``): only
+            they are filled from a filled neighbour; None: every fillable pixel is.
 
     """
     coarse = fillable[::2, ::2].astype(np.uint8)
@@ -187,8 +198,16 @@ def _fill_enclosed(labels: np.ndarray, fillable: np.ndarray, valid: np.ndarray,
     else:
         chosen = fill.view(np.uint8)[components]
     height, width = labels.shape
-    chosen = _upsample(chosen, (2 * chosen.shape[1], 2 * chosen.shape[0]))[:height, :width]
-    set_where(labels, PLANE, chosen.view(bool) & fillable)
+    size = (2 * chosen.shape[1], 2 * chosen.shape[0])
+    filled = _upsample(chosen, size)[:height, :width].view(bool) & fillable
+    set_where(labels, PLANE, filled)
+    if _FILL_EDGE_PX > 0:  # the edges the samples miss, next to a filled pixel
+        missed = fillable & ~_upsample(coarse, size)[:height, :width].view(bool)
+        if plain is not None:
+            missed &= plain
+        reach = np.ones((2 * _FILL_EDGE_PX + 1, 2 * _FILL_EDGE_PX + 1), np.uint8)
+        missed &= cv2.dilate(filled.view(np.uint8), reach).view(bool)
+        set_where(labels, PLANE, missed)
 
 
 def _check_focal(focal_px: tuple[float, float]) -> tuple[float, float]:
@@ -331,7 +350,7 @@ def _label_rows(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse:
     set_where(labels, UNKNOWN, hidden)
     set_where(parallax, NOT_MEASURED, hidden)
     _fill_enclosed(labels, (labels == UNKNOWN) & valid & decision.decidable, valid,
-                   (flow, float(config.parallax_threshold_px) / px_per_working))
+                   (flow, float(config.parallax_threshold_px) / px_per_working), decision.plain)
     return labels, parallax
 
 

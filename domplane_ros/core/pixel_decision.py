@@ -108,12 +108,15 @@ class PixelDecision:
         rising: (h, w) bool plane pixels whose measured parallax is at least
             :data:`_RISE_SHARE` of the threshold (:data:`_TRUE_SCALE_RISE_SHARE` with
             ``_NOISE_AWARE``): nearer than the plane, like the bottom of an obstacle.
+        plain: (h, w) bool pixels inside the right image whose left window has less texture
+            than ``config.min_texture`` (not measured: what the fill of plain regions fills).
     """
 
     labels: np.ndarray
     parallax: np.ndarray
     decidable: np.ndarray
     rising: np.ndarray
+    plain: np.ndarray
 
 
 def decide_pixels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coarse: np.ndarray,
@@ -138,20 +141,25 @@ def decide_pixels(left: np.ndarray, warped: np.ndarray, valid: np.ndarray, coars
     """
     fit = local_fit(left, warped, int(config.window_px), coarse, _NOISE_AWARE, valid)
     measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
+    plain = valid & ~measurable
     matched = None
     if _MEASUREMENT == 'one_step':
-        beyond = beyond_linear_range(left, warped, fit, int(config.window_px), measurable,
-                                     float(config.ncc_threshold), _LINEAR_RANGE_PX)
+        # The small shifts, trusted where the coarse flow does not explain the window better.
+        small = measurable & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
+        small &= fit.ncc >= float(config.ncc_threshold)
+        small &= ~beyond_linear_range(left, warped, fit, int(config.window_px), small,
+                                      _LINEAR_RANGE_PX)
     else:
         fit, matched = _matcher_fit(left, warped, fit)
-        beyond = None
+        small = measurable & matched  # a matcher: its shift wherever it matched
     noise = fit.noise if _NOISE_AWARE else None
-    labels, parallax, decidable = _classify(fit, valid, shift_inf, px_per_working, config,
-                                            beyond, noise, matched)
+    labels, parallax, decidable = _classify(fit, measurable, small, shift_inf, px_per_working,
+                                            config, noise, matched)
     share = _TRUE_SCALE_RISE_SHARE if _NOISE_AWARE else _RISE_SHARE
     rise_px = share * float(config.parallax_threshold_px) / px_per_working
     rising = (labels == PLANE) & (fit.shift >= np.float32(rise_px))
-    return PixelDecision(labels=labels, parallax=parallax, decidable=decidable, rising=rising)
+    return PixelDecision(labels=labels, parallax=parallax, decidable=decidable, rising=rising,
+                         plain=plain)
 
 
 def _matcher_fit(left: np.ndarray, warped: np.ndarray, fit: LocalFit
@@ -171,30 +179,24 @@ def _matcher_fit(left: np.ndarray, warped: np.ndarray, fit: LocalFit
     return replace(fit, shift=shift), matched
 
 
-def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
-              px_per_working: float, config: MaskConfig, beyond: np.ndarray | None = None,
-              noise: float | None = None, matched: np.ndarray | None = None
-              ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _classify(fit: LocalFit, measurable: np.ndarray, small: np.ndarray, shift_inf: np.ndarray,
+              px_per_working: float, config: MaskConfig, noise: float | None = None,
+              matched: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Return the working-scale labels, the parallax image and the decidable pixels.
 
     Decidable pixels are those where an obstacle of ``config.min_obstacle_height`` would show
-    at least ``config.parallax_threshold_px`` of residual parallax. ``beyond`` ((h, w) bool,
-    :func:`~domplane_ros.core.residual.beyond_linear_range`) marks pixels whose small shift
-    is not trusted. ``noise`` (grey levels, :func:`~domplane_ros.core.residual.pixel_noise`)
+    at least ``config.parallax_threshold_px`` of residual parallax. ``measurable`` ((h, w)
+    bool, changed in place) are the pixels inside the right image with texture, ``small``
+    ((h, w) bool) those whose small shift is measured and trusted: the one-step shift within
+    :data:`_LINEAR_RANGE_PX` where the zero-shift correlation holds and
+    :func:`~domplane_ros.core.residual.beyond_linear_range` does not object, or where a
+    matcher matched. ``noise`` (grey levels, :func:`~domplane_ros.core.residual.pixel_noise`)
     with a one-sided fit: the small shifts are judged by :func:`_judge` knowing their
     standard error; None: against the threshold alone. ``matched`` ((h, w) bool): the fit's
     shift is a stereo matcher's (:func:`_matcher_fit`), measured at any size where it holds;
-    None: the one-step shift, measured only within :data:`_LINEAR_RANGE_PX`.
+    None: the one-step shift.
     """
     threshold = float(config.parallax_threshold_px)
-    measurable = valid & (fit.variance >= float(config.min_texture) ** 2)
-    if matched is None:
-        small = measurable & (np.abs(fit.shift) < _LINEAR_RANGE_PX)
-        small &= fit.ncc >= float(config.ncc_threshold)
-    else:  # a matcher: its shift wherever it matched
-        small = measurable & matched
-    if beyond is not None:
-        small &= ~beyond
     residual = fit.flow_shift  # in place: the fit is not read again
     _copy_where(fit.shift, small, residual)
     residual *= np.float32(px_per_working)
@@ -216,9 +218,12 @@ def _classify(fit: LocalFit, valid: np.ndarray, shift_inf: np.ndarray,
     # counts. A point farther than the plane but nearer than infinity (a hole in the ground)
     # is an obstacle too.
     off = (magnitude >= threshold) | (fit.ncc < _REJECT_NCC)
-    if unsure is not None:
-        off &= ~unsure
-    off &= measurable & ~plane & (shift_inf > 0)
+    if unsure is not None:  # the judged plane may lie at or above the threshold
+        off &= ~unsure & ~plane
+    # Otherwise no off pixel is plane: plane needs a parallax below the threshold and the
+    # zero-shift correlation config.ncc_threshold, which its range keeps at or above
+    # _REJECT_NCC (parameters.py).
+    off &= measurable & (shift_inf > 0)
     off &= decidable | (residual >= _FAR_FACTOR * threshold)
     residual += shift_inf
     off &= residual >= threshold

@@ -354,8 +354,7 @@ def shifted_ncc(left: np.ndarray, warped: np.ndarray, fit: LocalFit, rows: slice
 
 
 def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, window: int,
-                        measurable: np.ndarray, ncc_threshold: float,
-                        linear_range_px: float) -> np.ndarray:
+                        small: np.ndarray, linear_range_px: float) -> np.ndarray:
     """Return (h, w) bool: small one-step shifts that the coarse flow's shift explains better.
 
     The one-step estimate holds within ``linear_range_px`` of zero. A window moved by
@@ -373,17 +372,15 @@ def beyond_linear_range(left: np.ndarray, warped: np.ndarray, fit: LocalFit, win
         warped: (h, w) uint8 right image warped into the left view.
         fit: Their :func:`local_fit`.
         window: Side of the fit's square window, pixels.
-        measurable: (h, w) bool pixels whose shift could be measured at all.
-        ncc_threshold: Zero-shift NCC a small shift needs to be trusted.
+        small: (h, w) bool pixels with a small shift that looks trusted: measurable, within
+            ``linear_range_px``, the zero-shift NCC at least the mask's ``ncc_threshold``.
         linear_range_px: The one-step estimate's range, working pixels.
 
     Returns:
         (h, w) bool, pixels with a small, trusted-looking shift that the flow's shift beats.
 
     """
-    candidates = measurable & (np.abs(fit.shift) < linear_range_px)
-    candidates &= fit.ncc >= np.float32(ncc_threshold)
-    candidates &= np.abs(fit.flow_shift) >= linear_range_px
+    candidates = small & (np.abs(fit.flow_shift) >= linear_range_px)
     rows = np.flatnonzero(candidates.any(axis=1))
     if rows.size == 0:
         return candidates

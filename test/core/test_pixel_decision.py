@@ -216,7 +216,7 @@ def test_box_faces_beyond_the_linear_range_are_not_plane(frames, monkeypatch):
     assert box_plane < 0.032 and box_obstacle > 0.895
     assert ground_obstacle < 0.0145
     monkeypatch.setattr(pixel_decision, 'beyond_linear_range',
-                        lambda left, warped, fit, window, measurable, ncc, linear:
-                        np.zeros(measurable.shape, bool))
+                        lambda left, warped, fit, window, small, linear:
+                        np.zeros(small.shape, bool))
     before = pooled()
     assert before[0] > 0.034 and before[1] < 0.891
