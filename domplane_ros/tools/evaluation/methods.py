@@ -123,14 +123,17 @@ def _roi_mask(shape: tuple[int, int], roi: Sequence[float]) -> np.ndarray | None
 
 
 def _orb_once(left: np.ndarray, right: np.ndarray, roi: Sequence[float], n_features: int,
-              threshold_px: float) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
-    orb = cv2.ORB_create(nfeatures=n_features)
-    keys_left, desc_left = orb.detectAndCompute(left, _roi_mask(left.shape, roi))
-    keys_right, desc_right = orb.detectAndCompute(right, _roi_mask(right.shape, roi))
+              threshold_px: float, sift: bool = False
+              ) -> tuple[np.ndarray | None, np.ndarray, np.ndarray, np.ndarray]:
+    detector = (cv2.SIFT_create(nfeatures=n_features) if sift
+                else cv2.ORB_create(nfeatures=n_features))
+    keys_left, desc_left = detector.detectAndCompute(left, _roi_mask(left.shape, roi))
+    keys_right, desc_right = detector.detectAndCompute(right, _roi_mask(right.shape, roi))
     empty = np.zeros((0, 2))
     if desc_left is None or desc_right is None:
         return None, empty, empty, np.zeros(0, bool)
-    matches = cv2.BFMatcher(cv2.NORM_HAMMING, crossCheck=True).match(desc_left, desc_right)
+    norm = cv2.NORM_L2 if sift else cv2.NORM_HAMMING
+    matches = cv2.BFMatcher(norm, crossCheck=True).match(desc_left, desc_right)
     src = np.array([keys_left[m.queryIdx].pt for m in matches], np.float64).reshape(-1, 2)
     dst = np.array([keys_right[m.trainIdx].pt for m in matches], np.float64).reshape(-1, 2)
     if src.shape[0] < 4:
@@ -144,7 +147,7 @@ def _orb_once(left: np.ndarray, right: np.ndarray, roi: Sequence[float], n_featu
 def run_orb_magsac(left: np.ndarray, right: np.ndarray, roi: Sequence[float] = (0, 0, 1, 1),
                    repeats: int = 3, n_features: int = ORB_FEATURES,
                    threshold_px: float = ORB_THRESHOLD_PX,
-                   mask_config: MaskConfig | None = None) -> MethodRun:
+                   mask_config: MaskConfig | None = None, sift: bool = False) -> MethodRun:
     """Run the correspondence baseline: ORB, cross-checked Hamming matching, MAGSAC.
 
     Args:
@@ -157,6 +160,8 @@ def run_orb_magsac(left: np.ndarray, right: np.ndarray, roi: Sequence[float] = (
         threshold_px: MAGSAC inlier threshold in pixels.
         mask_config: Settings of the plane mask drawn from the baseline's homography (not
             timed); default :class:`MaskConfig`.
+        sift: Use SIFT (``n_features`` features, cross-checked L2 matching) instead of ORB;
+            the method is then ``'sift_magsac'``.
 
     Returns:
         The :class:`MethodRun` (``warm_ms`` NaN: the baseline has no warm start).
@@ -166,7 +171,7 @@ def run_orb_magsac(left: np.ndarray, right: np.ndarray, roi: Sequence[float] = (
     found = None
     for _ in range(max(1, repeats)):
         start = time.perf_counter()
-        out = _orb_once(left, right, roi, n_features, threshold_px)
+        out = _orb_once(left, right, roi, n_features, threshold_px, sift)
         times.append(1e3 * (time.perf_counter() - start))
         if found is None:
             found = out
@@ -178,7 +183,7 @@ def run_orb_magsac(left: np.ndarray, right: np.ndarray, roi: Sequence[float] = (
         except ValueError:
             mask = None
     reason = '' if homography is not None else f'no homography from {src.shape[0]} matches'
-    return MethodRun(method='orb_magsac', homography=homography,
+    return MethodRun(method='sift_magsac' if sift else 'orb_magsac', homography=homography,
                      n_inliers=int(np.count_nonzero(inliers)), n_points=int(src.shape[0]),
                      time_ms=float(np.median(times)), mask=mask, inlier_points=src[inliers],
                      outlier_points=src[~inliers], reason=reason)
