@@ -239,15 +239,14 @@ def error_tile(row: Row, pair: Perturbed, homography: np.ndarray | None,
         tile[points[:, 1], points[:, 0]] = colours
     elif points.shape[0]:
         tile[points[:, 1], points[:, 0]] = (255, 120, 0)  # refused: the road in blue
-    if homography is not None and not pair.has_road:  # no road: show where its plane is
-        tile = cv2.cvtColor(overlay(pair.left, _plane_pixels(pair, homography)),
-                            cv2.COLOR_RGB2BGR)
     scale = width / tile.shape[1]
     tile = cv2.resize(tile, (width, max(1, int(round(tile.shape[0] * scale)))),
                       interpolation=cv2.INTER_AREA)
     verdict = (f'{row.verdict} {row.error_px:.2f} px' if row.published
                and math.isfinite(row.error_px) else row.verdict)
     texts = [f'{row.family} seed {row.seed} {row.method}: {verdict}', row.detail[:95]]
+    if homography is not None:
+        texts.append(plane_note(homography, pair.left.shape))
     if row.reason:
         texts += [row.reason[i:i + 95] for i in range(0, min(len(row.reason), 190), 95)]
     band = np.full((16 * len(texts) + 4, width, 3), 255, np.uint8)
@@ -257,13 +256,23 @@ def error_tile(row: Row, pair: Perturbed, homography: np.ndarray | None,
     return np.vstack([band, tile])
 
 
-def _plane_pixels(pair: Perturbed, homography: np.ndarray) -> np.ndarray:
-    """Return (H, W) uint8: 255 where the plane maps left onto right within 12 grey levels."""
-    warped = cv2.warpPerspective(pair.right, homography, pair.left.shape[::-1],
-                                 flags=cv2.INTER_LINEAR | cv2.WARP_INVERSE_MAP)
-    diff = cv2.absdiff(cv2.GaussianBlur(pair.left, (5, 5), 0),
-                       cv2.GaussianBlur(warped, (5, 5), 0))
-    return np.where((diff < 12) & (warped > 0), 255, 0).astype(np.uint8)
+def plane_note(homography: np.ndarray, shape: tuple[int, int]) -> str:
+    """Describe a plane by its disparity ``x - x'``: at the bottom centre, per row and its roll.
+
+    The roll is ``atan((dd/dx) / (dd/dy))`` along the bottom row and the centre column: near
+    0 for a ground plane of a level rig, the horizon's tilt otherwise.
+    """
+    rows, cols = shape
+
+    def disparity(x: float, y: float) -> float:
+        return x - float(apply_homography(homography, np.array([[x, y]]))[0, 0])
+
+    bottom = disparity(cols / 2, rows - 1)
+    per_row = (bottom - disparity(cols / 2, 0)) / max(1, rows - 1)
+    per_col = (disparity(cols - 1, rows - 1) - disparity(0, rows - 1)) / max(1, cols - 1)
+    roll = math.degrees(math.atan2(per_col, per_row))
+    return (f'plane: disparity {bottom:.1f} px at the bottom centre, {per_row:+.4f} px per row, '
+            f'roll {roll:+.0f} deg')
 
 
 def write_sheet(path: Path, kept: Sequence[tuple[Row, Perturbed, np.ndarray | None]],
