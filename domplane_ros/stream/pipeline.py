@@ -538,6 +538,7 @@ class PlanePipeline:
     # --- Searching -------------------------------------------------------------------------
     def _start_search(self) -> None:
         self._state = SEARCHING
+        self._trust.lock_lost()
         self._tracking_frames = 0
         self._last_h = None
         self._last_energy_per_point = None

@@ -120,6 +120,19 @@ SIBLING_NEAR_PX = 8.0
 # seeds (sim/boards.py, small and lens, 0-129; docs/METHOD.md).
 MIN_REGION_SCORE = 0.8
 MIN_REGION_FRACTION = 0.1
+# A held lock is also held against its reference (TrustGate.lock_reference): the verification
+# of the plane it started from, i.e. the first plane published after a search (a search's
+# finished winner) or a challenger that replaced the lock. A warm plane scoring under
+# LOCK_REFERENCE_RATIO x that score, or explaining under LOCK_BOTTOM_RATIO x the share of the
+# image bottom that it explained (PlaneVerification.bottom_score), is refused: the pipeline
+# then searches in the same pair. The lock's history (the rolling median of its own last
+# scores, verification.drop_ratio) follows a plane whose score falls slowly pair by pair and
+# never fires; the reference does not move with it. The scene itself changes the true plane's
+# score over a lock (measured below), so the ratios are loose: they catch a lock that slid off
+# the floor, not a pixel of bias. False: the history alone, as before session 17.
+LOCK_REFERENCE = True
+LOCK_REFERENCE_RATIO = 0.7
+LOCK_BOTTOM_RATIO = 0.4
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -141,6 +154,7 @@ class TrustGate:
         self._coarse = CoarseAligner(CoarseConfig(width_px=settings.coarse_width_px))
         self._scores: deque[float] = deque(maxlen=history)
         self._locked_frames = 0
+        self._reference: PlaneVerification | None = None
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
         self._levels: tuple[np.ndarray, np.ndarray, int] | None = None
@@ -232,6 +246,7 @@ class TrustGate:
         """Forget the lock's history (a new search)."""
         self._scores.clear()
         self._locked_frames = 0
+        self._reference = None
 
     @property
     def lock_score(self) -> float | None:
@@ -341,13 +356,49 @@ class TrustGate:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
                            f'below verification.drop_ratio {self.settings.drop_ratio:g} x the '
                            f"lock's {lock:.2f} (the view changed)")
-        return Verdict(True, check, '')
+        return (self._below_reference(check) if locked else None) or Verdict(True, check, '')
 
     def record(self, verdict: Verdict) -> None:
-        """Add a published plane's score to the lock's history."""
+        """Add a published plane's score to the lock's history (the first: its reference)."""
         if verdict.accepted:
             self._scores.append(verdict.score)
             self._locked_frames += 1
+            if self._reference is None:
+                self._reference = verdict.verification
+
+    @property
+    def lock_reference(self) -> PlaneVerification | None:
+        """Return the verification the current lock started from (:data:`LOCK_REFERENCE`)."""
+        return self._reference
+
+    def lock_lost(self) -> None:
+        """Forget the lock's reference: the next published plane (a search's) starts a lock.
+
+        The score history is kept (:meth:`reset` forgets both).
+        """
+        self._reference = None
+
+    def _below_reference(self, check: PlaneVerification) -> Verdict | None:
+        """Return the refusal of a warm plane that lost its lock's score or bottom, else None.
+
+        See :data:`LOCK_REFERENCE`: a ground plane scoring under :data:`LOCK_REFERENCE_RATIO`
+        x the score the lock started from, or explaining under :data:`LOCK_BOTTOM_RATIO` x
+        the share of the image bottom it explained, has slid off the plane it locked on (or
+        the view changed): refused, the pipeline searches.
+        """
+        reference = self._reference
+        if not LOCK_REFERENCE or reference is None or self.settings.plane == 'any':
+            return None
+        if check.score < LOCK_REFERENCE_RATIO * reference.score:
+            return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
+                           f'below {LOCK_REFERENCE_RATIO:g} x the {reference.score:.2f} the '
+                           'lock started from (a drifting lock?)')
+        if check.bottom_score < LOCK_BOTTOM_RATIO * reference.bottom_score:
+            return Verdict(False, check, 'not the ground: the plane explains '
+                           f'{100 * check.bottom_score:.0f} % of the bottom of the image, under '
+                           f'{LOCK_BOTTOM_RATIO:g} x the {100 * reference.bottom_score:.0f} % '
+                           'the lock started from (a drifting lock?)')
+        return None
 
     def coarse_candidates(self, left: np.ndarray, right: np.ndarray, shifted: bool = True,
                           peaks: bool = False) -> np.ndarray:

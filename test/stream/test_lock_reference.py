@@ -1,0 +1,44 @@
+"""A held lock is held against the plane it started from: a lock that slides off is searched.
+
+Ground truth comes from the renderer; the configuration is the documented default.
+"""
+
+from __future__ import annotations
+
+from domplane_ros.sim.generators import scene_sequence
+from domplane_ros.sim.rigs import plane_error_px
+from domplane_ros.stream import trust as trust_module
+from domplane_ros.stream.pipeline import PlanePipeline
+import pytest
+
+PERIOD_NS = 33_333_333
+
+
+@pytest.fixture(scope='module')
+def faint_tiles():
+    # evaluate_drift's floors family, tuning seed 33 (32 cm faint tiles, three boxes). Pair 0
+    # is the search's plane (0.05 px, score 0.58, 66 % of the bottom); pairs 1-3 stay under
+    # 0.5 px; in pair 4 the prediction is 2.67 px off and the warm estimate, 2.39 px off, passes
+    # the gate with score 0.31 and 11 % of the bottom (the lock's median 0.55 follows it: 0.31
+    # is above its half), and pair 5 is published 2.81 px off (docs/BENCHMARKS.md round 18).
+    return scene_sequence(16, 33, floor='tiles_faint_64')[:6]
+
+
+def _errors(frames) -> list[float | None]:
+    pipeline = PlanePipeline()
+    out = []
+    for index, frame in enumerate(frames):
+        result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+        out.append(plane_error_px(frame, result.homography) if result.ok else None)
+    return out
+
+
+def test_a_lock_that_loses_its_start_score_is_refused_and_searched(faint_tiles, monkeypatch):
+    errors = _errors(faint_tiles)
+    published = [e for e in errors if e is not None]
+    assert len(published) >= 5, errors
+    assert max(published) < 1.0, errors
+    # Without the lock's reference the slid planes of pairs 4 and 5 are published.
+    monkeypatch.setattr(trust_module, 'LOCK_REFERENCE', False)
+    off = _errors(faint_tiles)
+    assert off[4] is not None and off[4] > 2.0, off
