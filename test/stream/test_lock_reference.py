@@ -79,3 +79,19 @@ def test_a_cut_starts_the_new_lock_from_its_own_plane():
         errors.append(plane_error_px(frame, result.homography) if result.ok else None)
     assert all(e is not None and e < 1.0 for e in errors), errors
     assert pipeline.stats.reinitialisations == 2, errors
+
+
+def test_a_changed_verification_scale_searches_again(faint_tiles):
+    # Scores at another working width are not the lock's: the warm start is dropped, the pair
+    # searched, and the search's plane is the new lock's reference (review18).
+    pipeline = PlanePipeline()
+    for index, frame in enumerate(faint_tiles[:3]):
+        if index == 2:
+            config = pipeline.config
+            pipeline.update_config(replace(config, verification=replace(
+                config.verification, scale=0.3)))
+            assert pipeline.state == 'searching'
+        result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+        assert result.ok and plane_error_px(frame, result.homography) < 1.0
+    assert pipeline.stats.reinitialisations == 2
+    assert pipeline.state == 'locked'
