@@ -116,16 +116,23 @@ class PlanePipeline:
     def update_config(self, config: PlaneNodeConfig) -> None:
         """Use a new configuration from the next frame on, keeping the warm start.
 
-        A changed prior, initial homography or ``verification.plane`` drops the warm start.
+        A changed prior, initial homography, ``verification.plane`` or ``verification.scale``
+        drops the warm start. Other changed ``verification.*`` settings keep the lock with its
+        score history and reference (:data:`~domplane_ros.stream.trust.LOCK_REFERENCE`): its
+        scores are measured at the same working width, and a lock whose reference were
+        dropped would take its next plane, slid or not, as the plane it started from.
         """
         if (config.prior != self.config.prior
                 or config.initial_homography != self.config.initial_homography
-                or config.verification.plane != self.config.verification.plane):
+                or config.verification.plane != self.config.verification.plane
+                or config.verification.scale != self.config.verification.scale):
             self.reset()
             self._checks.clear()
             self._searcher.prior_changed()
         if config.verification != self.config.verification:
-            self._trust = TrustGate(config.verification)
+            trust = TrustGate(config.verification)
+            trust.take_lock(self._trust)
+            self._trust = trust
         self.config = config
 
     def reset(self) -> None:

@@ -371,6 +371,16 @@ class TrustGate:
         """Return the verification the current lock started from (:data:`LOCK_REFERENCE`)."""
         return self._reference
 
+    def take_lock(self, other: TrustGate) -> None:
+        """Hold the lock of ``other`` (the gate of the settings before a change) from now on.
+
+        Its score history, locked pairs and reference (:data:`LOCK_REFERENCE`) are this
+        gate's: only for scores measured alike (the same ``scale`` and ``plane``).
+        """
+        self._scores = deque(other._scores, maxlen=self._scores.maxlen)
+        self._locked_frames = other._locked_frames
+        self._reference = other._reference
+
     def lock_lost(self) -> None:
         """Forget the lock's reference: the next published plane (a search's) starts a lock.
 
