@@ -14,6 +14,18 @@ def transfer_error_px(scene, homography: np.ndarray) -> float:
                                         - apply_homography(scene.homography, pts), axis=1)))
 
 
+def stream_errors(frames, period_ns: int = 33_333_333) -> list[float | None]:
+    """Run a fresh default pipeline over ``frames``: each pair's error (px), None unpublished."""
+    from domplane_ros.sim.rigs import plane_error_px
+    from domplane_ros.stream.pipeline import PlanePipeline
+    pipeline = PlanePipeline()
+    out = []
+    for index, frame in enumerate(frames):
+        result = pipeline.process(frame.left, frame.right, index * period_ns)
+        out.append(plane_error_px(frame, result.homography) if result.ok else None)
+    return out
+
+
 def two_depths(shift_left_px: float, shift_right_px: float) -> tuple[np.ndarray, np.ndarray]:
     """Return a textured pair whose left and right image halves move by different shifts."""
     rng = np.random.default_rng(5)

@@ -6,12 +6,9 @@ Ground truth comes from the renderer; the configuration is the documented defaul
 from __future__ import annotations
 
 from domplane_ros.sim.generators import scene_sequence
-from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import warm as warm_module
-from domplane_ros.stream.pipeline import PlanePipeline
 import pytest
-
-PERIOD_NS = 33_333_333
+from truth import stream_errors
 
 
 @pytest.fixture(scope='module')
@@ -22,23 +19,14 @@ def walk():
     return scene_sequence(16, seed=41)[:6]
 
 
-def _errors(frames) -> list[float | None]:
-    pipeline = PlanePipeline()
-    out = []
-    for index, frame in enumerate(frames):
-        result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
-        out.append(plane_error_px(frame, result.homography) if result.ok else None)
-    return out
-
-
 def test_a_lock_on_a_checker_with_boxes_does_not_drift_off_the_floor(walk, monkeypatch):
-    errors = _errors(walk)
+    errors = stream_errors(walk)
     published = [e for e in errors if e is not None]
     assert len(published) >= 5, errors
     assert max(published) < 1.0, errors
     # Without the anchor, the same warm pairs drift: the test fails when it is switched off.
     monkeypatch.setattr(warm_module, 'WARM_ANCHOR', False)
-    drifted = [e for e in _errors(walk) if e is not None]
+    drifted = [e for e in stream_errors(walk) if e is not None]
     assert max(drifted) > 2.0, drifted
 
 
@@ -52,12 +40,12 @@ def planks():
 
 
 def test_a_widened_warm_estimate_does_not_replace_a_better_warm_start(planks, monkeypatch):
-    errors = _errors(planks)
+    errors = stream_errors(planks)
     assert None not in errors, errors
     assert max(errors) < 1.0, errors
     # Without the comparison with the warm start, pair 29 publishes the widened plane.
     monkeypatch.setattr(warm_module, 'WIDENED_BEATS_START', False)
-    jumped = _errors(planks)
+    jumped = stream_errors(planks)
     assert jumped[1] is not None and jumped[1] > 5.0, jumped
 
 
@@ -84,8 +72,8 @@ def test_the_anchor_does_not_publish_an_unfitted_prediction(faint_walk, monkeypa
     # and was published 1.54 px off (now the anchor needs estimator.min_inliers in the band).
     # Without the anchor that pair is refused, searched and published 0.02 px off. Fails while
     # an unfitted start may replace the warm estimate.
-    errors = _errors(faint_walk)
+    errors = stream_errors(faint_walk)
     assert errors[5] is None or errors[5] < 1.0, errors
     monkeypatch.setattr(warm_module, 'WARM_ANCHOR', False)
-    off = _errors(faint_walk)
+    off = stream_errors(faint_walk)
     assert off[5] is not None and off[5] < 1.0, off

@@ -12,6 +12,7 @@ from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
 import pytest
+from truth import stream_errors
 
 PERIOD_NS = 33_333_333
 
@@ -26,23 +27,14 @@ def faint_tiles():
     return scene_sequence(16, 33, floor='tiles_faint_64')[:6]
 
 
-def _errors(frames) -> list[float | None]:
-    pipeline = PlanePipeline()
-    out = []
-    for index, frame in enumerate(frames):
-        result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
-        out.append(plane_error_px(frame, result.homography) if result.ok else None)
-    return out
-
-
 def test_a_lock_that_loses_its_start_score_is_refused_and_searched(faint_tiles, monkeypatch):
-    errors = _errors(faint_tiles)
+    errors = stream_errors(faint_tiles)
     published = [e for e in errors if e is not None]
     assert len(published) >= 5, errors
     assert max(published) < 1.0, errors
     # Without the lock's reference the slid planes of pairs 4 and 5 are published.
     monkeypatch.setattr(trust_module, 'LOCK_REFERENCE', False)
-    off = _errors(faint_tiles)
+    off = stream_errors(faint_tiles)
     assert off[4] is not None and off[4] > 2.0, off
 
 
