@@ -168,7 +168,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'Image width of the coarse photometric alignment, pixels.', 64, 2048),
     ParamSpec('verification.max_ground_roll_deg', 8.0, 'float',
               'Ground mode: largest roll of the ground about the optical axis, degrees (its '
-              'disparity must grow down the image within it, the right camera\'s own roll '
+              "disparity must grow down the image within it, the right camera's own roll "
               'taken out): a plane through walls or panels at several depths is refused. A head '
               'rolled as a whole counts once, both cameras rolled alike against the baseline '
               'about twice; raise it for a rolling head; 90 switches the check off.',

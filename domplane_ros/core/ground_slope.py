@@ -145,6 +145,10 @@ def ground_roll_deg(homography: np.ndarray, width: int, height: int,
         cx, cy = (float(v) for v in principal_point_px)
     else:
         cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+    if hom[1, 1] - cy * hom[2, 1] < 0.0:
+        # H and -H are the same plane; the model's G[1, 1] is positive (the vergence is read
+        # from G's first column, whose sign follows H's scale).
+        hom = -hom
     focals = np.geomspace(low, high, samples)
     # G = K^-1 H K per focal length: of its entries used here only G[2, 0] and G[2, 1] depend
     # on f (the upper-left 2 x 2 block does not).

@@ -136,16 +136,17 @@ LOCK_REFERENCE_RATIO = 0.7
 LOCK_BOTTOM_RATIO = 0.4
 # A ground plane about to be published (a search's finished winner, a challenger that beats the
 # lock, a warm pair's plane) must have its disparity grow down the image within
-# verification.max_ground_roll_deg degrees (default 8) (ground_roll_deg: the least roll over the prior's focal lengths, with the camera
-# model's vergence and the right camera's roll taken out): the prior's camera model has a level
-# head. Not on a search's unfinished candidates or rivals, and no swap reason. Measured
-# (docs/BENCHMARKS.md round 18): the true floors of the default prior's 6160 rendered set-ups
-# (tuning seeds 0-129, 7000-13029) at most 0.08 deg, 1.41 deg on the same heads as rough rigs;
-# 424 correct planes published on tuning seeds (every single-pair trust case 0-59, and 133 of
-# the 151 floors whose disparity grows 0.020-0.035 px per row) at most 5.5 deg (rough 10159,
-# 0.75 px off); the wrong planes published in ground mode through the panels of a floorless room
-# (sim/boards.py small boards, tuning seeds 0-129 with and without a lens, 13 planes 25-60 px
-# off) 11.8-49 deg on 10, but 0.0-0.6 deg on 3 (planes of the prior's level family): no proof.
+# verification.max_ground_roll_deg degrees (default 8) (ground_roll_deg: the least roll over the
+# prior's focal lengths, with the camera model's vergence and the right camera's roll taken out):
+# the prior's camera model has a level head. Not on a search's unfinished candidates or rivals, and
+# no swap reason. Measured (docs/BENCHMARKS.md round 18): the true floors of the default prior's
+# 6160 rendered set-ups (tuning seeds 0-129, 7000-13029) at most 0.08 deg, 1.41 deg on the same
+# heads as rough rigs; 424 correct planes published on tuning seeds (every single-pair trust case
+# 0-59, and 133 of the 151 floors whose disparity grows 0.020-0.035 px per row) at most 5.5 deg
+# (rough 10159, 0.75 px off); the wrong planes published in ground mode through the panels of a
+# floorless room (sim/boards.py small boards, tuning seeds 0-129 with and without a lens, 13 planes
+# 25-60 px off) 11.8-49 deg on 10, but 0.0-0.6 deg on 3 (planes of the prior's level family): no
+# proof.
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480

@@ -71,6 +71,18 @@ def test_a_rolled_plane_gives_its_roll(head, roll):
     assert np.sign(least) == np.sign(roll) and abs(roll) - 1.0 < abs(least) <= abs(roll) + 1e-6
 
 
+@pytest.mark.parametrize('roll', [0.0, 10.0])
+def test_the_roll_does_not_depend_on_the_homographys_scale(roll):
+    # H and -H (or any multiple) are the same plane: rreview19 found -H of a level head's
+    # ground read 92.5 deg (refused at any bound) where H reads 0.
+    h = _rolled_plane(500.0, 0.1, 30.0, 2.0, roll)
+    expected = ground_roll_deg(h, 640, 480, DEFAULT_FOCAL)
+    assert abs(expected) < 0.1 if roll == 0.0 else 9.0 < expected <= 10.0 + 1e-6
+    for scale in (-1.0, -0.01, 2.5):
+        assert ground_roll_deg(scale * h, 640, 480, DEFAULT_FOCAL) == pytest.approx(
+            expected, abs=1e-6)
+
+
 def test_bad_arguments_are_refused():
     h = plane_homography(500.0, 0.1, 30.0, 0.0, 640, 480)
     with pytest.raises(ValueError):

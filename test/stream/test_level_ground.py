@@ -1,10 +1,10 @@
 """A ground plane is published only if its disparity grows down the image (a level head).
 
-``verification.max_ground_roll_deg`` (round 18, a parameter since round 19): the wrong plane that ground mode published through
-the panels of a rendered room without a floor (``evaluate_boards --small``, tuning seed 25,
-29.4 px off at confidence 1.0) is refused for its roll, while a shallow floor of a rough rig
-inside the default prior (the correct plane of the tuning pairs closest to the limit) is
-still published.
+``verification.max_ground_roll_deg`` (round 18, a parameter since round 19): the wrong plane
+that ground mode published through the panels of a rendered room without a floor
+(``evaluate_boards --small``, tuning seed 25, 29.4 px off at confidence 1.0) is refused for its
+roll, while a shallow floor of a rough rig inside the default prior (the correct plane of the
+tuning pairs closest to the limit) is still published.
 """
 
 from __future__ import annotations
