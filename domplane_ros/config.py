@@ -132,6 +132,7 @@ class VerificationSettings(_Section):
     challenge_period: int = 10
     coarse_candidates: bool = True
     coarse_width_px: int = 320
+    max_ground_roll_deg: float = 10.0
 
 
 @dataclass(frozen=True)

@@ -166,6 +166,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'rough rigs (roll, vertical offset, focal mismatch) the prior grid misses.'),
     ParamSpec('verification.coarse_width_px', 320, 'int',
               'Image width of the coarse photometric alignment, pixels.', 64, 2048),
+    ParamSpec('verification.max_ground_roll_deg', 10.0, 'float',
+              'Ground mode: largest roll of the ground about the optical axis, degrees (its '
+              "disparity must grow down the image within it, the right camera's own roll "
+              'taken out): a plane through walls or panels at several depths is refused. A head '
+              "rolled as a whole counts once, the left camera's roll against the baseline "
+              'about twice (both cameras rolled alike too); raise it for a rolling head; 90 '
+              'switches the check off.',
+              1.0, 90.0),
     # Mask.
     ParamSpec('mask.scale', 0.5, 'float',
               'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),

@@ -3,8 +3,10 @@
 :func:`swap_evidence` checks whether a plane that verifies well was found for swapped cameras.
 For a ground plane seen by a correctly ordered head the plane's disparity ``x - H(x)`` grows
 toward the bottom of the image (nearer floor); for swapped cameras ``H`` is the inverse and the
-disparity shrinks toward the bottom; a wall facing the head has none. The photometric side of
-a plane's verdict is :mod:`domplane_ros.core.verification`.
+disparity shrinks toward the bottom; a wall facing the head has none. :func:`ground_roll_deg`
+reads the direction of that growth: for the ground under a level head it is straight down the
+image once the camera model's vergence and the right camera's roll are taken out. The
+photometric side of a plane's verdict is :mod:`domplane_ros.core.verification`.
 
 Nothing here imports ROS; the functions take numpy arrays and return frozen values.
 """
@@ -12,9 +14,13 @@ Nothing here imports ROS; the functions take numpy arrays and return frozen valu
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 from domplane_ros.core.homography import as_valid_homography
 import numpy as np
+
+# Focal lengths tried between the prior's bounds by ground_roll_deg (geometric spacing).
+ROLL_FOCAL_SAMPLES = 33
 
 
 @dataclass(frozen=True)
@@ -86,3 +92,75 @@ def _shear(hom: np.ndarray, x: float, y: float) -> float:
     dx_dy = (hom[0, 1] * w - p[0] * hom[2, 1]) / (w * w)
     dy_dx = (hom[1, 0] * w - p[1] * hom[2, 0]) / (w * w)
     return float(-(dx_dy + dy_dx))
+
+
+def ground_roll_deg(homography: np.ndarray, width: int, height: int,
+                    focal_px: tuple[float, float], principal_point_px: Sequence[float] = (),
+                    samples: int = ROLL_FOCAL_SAMPLES) -> float:
+    """Return the least roll of a ground plane about the optical axis, over the focal range.
+
+    In the prior's camera model (:mod:`domplane_ros.core.prior`) ``G = K^-1 H K`` is
+    ``R_v (I - c n^T)`` with ``c = (b / h, 0, 0)`` and the ground's normal
+    ``n = (0, cos(tilt), sin(tilt))``: the ground's disparity grows straight down the image
+    (``c n_x`` across it, ``c n_y`` down it). For each focal length ``f`` sampled in
+    ``focal_px`` the vergence ``v`` is read from ``G``'s first column and ``M = R_v^T G``
+    scaled to ``M[1, 1] = 1`` (a focal mismatch of the right camera scales both image axes
+    alike); ``c n_x = 1 - M[0, 0]``, ``c n_y = -(M[0, 1] + M[1, 0])``. A roll ``r`` of the
+    right camera adds ``r`` to ``M[1, 0]`` and ``-r c n_y`` to ``c n_x`` (to first order), so
+    the roll of the plane is ``atan2(c n_x + M[1, 0] c n_y, c n_y)``; the least in magnitude
+    over the focal lengths is returned (the focal length is known only to the prior's range).
+
+    The ground of a level head inside the prior has none: 0.08 deg at most over the default
+    prior's rendered set-ups, 1.4 deg on the same heads as rough rigs (roll 4 deg, pitch
+    2 deg, focal 3 %, principal points 10 px apart); ``stream/trust.py``
+    (``verification.max_ground_roll_deg``) for what published planes measure. A rotation of
+    both images by ``a`` (both cameras rolled alike against their baseline) reads about
+    ``2 a``: its vertical disparity is taken for the right camera's roll and its vertical
+    compression for a focal mismatch.
+
+    Args:
+        homography: (3, 3) float left-to-right plane homography.
+        width: Image width in pixels.
+        height: Image height in pixels.
+        focal_px: (min, max) focal length range of the prior, pixels.
+        principal_point_px: The prior's ``(cx, cy)``, or empty for the image centre.
+        samples: Focal lengths sampled (geometric spacing).
+
+    Returns:
+        Signed roll in degrees, in (-180, 180]; 90 or more where the disparity does not grow
+        down the image.
+
+    Raises:
+        ValueError: If the homography is not a finite non-singular (3, 3) matrix, the size
+            is not positive or the focal range is not positive.
+
+    """
+    hom = as_valid_homography(homography)
+    if width < 1 or height < 1:
+        raise ValueError(f'image size must be positive, got {width} x {height}')
+    low, high = (float(f) for f in focal_px)
+    if not 0.0 < low <= high or samples < 1:
+        raise ValueError(f'focal range must satisfy 0 < min <= max, got {focal_px!r}')
+    if len(principal_point_px) == 2:
+        cx, cy = (float(v) for v in principal_point_px)
+    else:
+        cx, cy = (width - 1) / 2.0, (height - 1) / 2.0
+    if hom[1, 1] - cy * hom[2, 1] < 0.0:
+        # H and -H are the same plane; the model's G[1, 1] is positive (the vergence is read
+        # from G's first column, whose sign follows H's scale).
+        hom = -hom
+    focals = np.geomspace(low, high, samples)
+    # G = K^-1 H K per focal length: of its entries used here only G[2, 0] and G[2, 1] depend
+    # on f (the upper-left 2 x 2 block does not).
+    g00, g01 = hom[0, 0] - cx * hom[2, 0], hom[0, 1] - cx * hom[2, 1]
+    g10, g11 = hom[1, 0] - cy * hom[2, 0], hom[1, 1] - cy * hom[2, 1]
+    g20, g21 = focals * hom[2, 0], focals * hom[2, 1]
+    angle = np.arctan2(-g20, g00)
+    cos, sin = np.cos(angle), np.sin(angle)
+    scale = g11 if abs(g11) >= 1e-12 else 1e-12
+    m00 = (cos * g00 - sin * g20) / scale
+    m01 = (cos * g01 - sin * g21) / scale
+    m10 = g10 / scale
+    across, down = 1.0 - m00, -(m01 + m10)
+    rolls = np.degrees(np.arctan2(across + m10 * down, down))
+    return float(rolls[int(np.argmin(np.abs(rolls)))])

@@ -100,7 +100,7 @@ class PlanePipeline:
                                      self.counts, lambda *args: self._warm.estimate(*args))
         self._tracker = FrameTracker()
         self._challenge: Challenge | None = None
-        self._trust = TrustGate(self.config.verification)
+        self._trust = TrustGate(self.config.verification, prior=self.config.prior)
         self._warm = WarmFit(lambda: self.config, lambda: self._trust, self._work)
 
     @property
@@ -130,9 +130,10 @@ class PlanePipeline:
             self._checks.clear()
             self._searcher.prior_changed()
         if config.verification != self.config.verification:
-            trust = TrustGate(config.verification)
+            trust = TrustGate(config.verification, prior=config.prior)
             trust.take_lock(self._trust)
             self._trust = trust
+        self._trust.prior = config.prior
         self.config = config
 
     def reset(self) -> None:
@@ -508,12 +509,13 @@ class PlanePipeline:
                 best, verdict, _ = self._trust.pick(step.left, step.right, [result],
                                                     self.config.features.roi)
                 if best is not None and verdict is not None and self._trust.beats(verdict, lock):
-                    step.warm_start = 'challenger'
-                    self._trust.reset()
-                    self._verified(step, *self._work().finished(step, problem, feats, size,
-                                                                best, verdict))
-                    self._challenge = None
-                    return True
+                    done = self._work().finished(step, problem, feats, size, best, verdict)
+                    if not self._trust.rolled_refusal(done[0].homography, *size):
+                        step.warm_start = 'challenger'
+                        self._trust.reset()
+                        self._verified(step, *done)
+                        self._challenge = None
+                        return True
         if self._challenge.done:
             self._challenge = None
         return True

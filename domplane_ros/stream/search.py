@@ -187,7 +187,8 @@ class PlaneSearch:
         if reason or isinstance(problem, FailedEstimate):
             step.reason = reason or problem.reason
             best, verdict, _ = self._photometric_search(step, size)
-            refused = '' if verdict is None else _finish_refusal(verdict)
+            refused = ('' if best is None or verdict is None
+                       else self._finished_refusal(best, verdict, size))
             if refused:
                 step.reason = refused
                 return None
@@ -235,7 +236,7 @@ class PlaneSearch:
             if best is step.initial:
                 step.warm_start = 'initial'
             done = self._work().finished(step, problem, feats, size, best, verdict)
-            unverified = _finish_refusal(done[1])
+            unverified = self._finished_refusal(*done, size)
             if not unverified:
                 return self._done(*done)
             search.best = None
@@ -354,6 +355,17 @@ class PlaneSearch:
             pool[next(i for i, other in enumerate(pool) if other is plane)] = refined
             moved = True
         return moved
+
+    def _finished_refusal(self, best: PlaneEstimate, verdict: Verdict, size: tuple[int, int]
+                          ) -> str:
+        """Return why a finished winner is not published ('' if it is).
+
+        :func:`_finish_refusal`, then the gate's roll of a ground plane
+        (:meth:`~domplane_ros.stream.trust.TrustGate.rolled_refusal`): both only on the plane
+        about to be published, never on the pick's unfinished candidates.
+        """
+        return (_finish_refusal(verdict)
+                or self._trust().rolled_refusal(best.homography, *size))
 
     def _done(self, best: PlaneEstimate | None, verdict: Verdict | None
               ) -> tuple[PlaneEstimate, Verdict] | None:

@@ -5,7 +5,8 @@ would publish is checked here by evidence the corners do not use
 (:func:`~domplane_ros.core.verification.verify_plane`: the share of the image's texture that
 this plane, and not the same plane moved slightly, explains) and by the geometry of a ground
 plane (:func:`~domplane_ros.core.ground_slope.swap_evidence`: its disparity must grow toward
-the image bottom, or left and right are swapped).
+the image bottom, or left and right are swapped; and, for a plane about to be published,
+:meth:`TrustGate.rolled_refusal`: it must grow straight down the image, as under a level head).
 
 A search publishes a plane only if it is *unique*: it must explain clearly more of the image
 (:data:`~domplane_ros.stream.verdict.CHALLENGE_MARGIN` times) than every distinct plane the
@@ -40,9 +41,9 @@ from collections import deque
 import statistics
 from typing import Any, Callable, Generator, Hashable, Sequence
 
-from domplane_ros.config import VerificationSettings
+from domplane_ros.config import PriorConfig, VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
-from domplane_ros.core.ground_slope import swap_evidence
+from domplane_ros.core.ground_slope import ground_roll_deg, swap_evidence
 from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, AgreementMaps, PlaneVerification,
@@ -133,6 +134,21 @@ MIN_REGION_FRACTION = 0.1
 LOCK_REFERENCE = True
 LOCK_REFERENCE_RATIO = 0.7
 LOCK_BOTTOM_RATIO = 0.4
+# A ground plane about to be published (a search's finished winner, a challenger that beats the
+# lock, a warm pair's plane) must have its disparity grow down the image within
+# verification.max_ground_roll_deg degrees (default 10) (ground_roll_deg: the least roll over the
+# prior's focal lengths, with the camera model's vergence and the right camera's roll taken out):
+# the prior's camera model has a level head. Not on a search's unfinished candidates or rivals, and
+# no swap reason. Measured (docs/BENCHMARKS.md round 18): the true floors of the default prior's
+# 6160 rendered set-ups (tuning seeds 0-129, 7000-13029) at most 0.08 deg, 1.41 deg on the same
+# heads as rough rigs; 424 correct planes published on tuning seeds (every single-pair trust case
+# 0-59, and 133 of the 151 floors whose disparity grows 0.020-0.035 px per row) at most 5.5 deg
+# (rough 10159, 0.75 px off); the wrong planes published in ground mode through the panels of a
+# floorless room (sim/boards.py small boards, tuning seeds 0-129 with and without a lens, 13 planes
+# 25-60 px off) 11.8-49 deg on 10, but 0.0-0.6 deg on 3 (planes of the prior's level family): no
+# proof. The default 10 (round 19, review rreview19; 8 in round 18): a left camera rolled 4 deg
+# against the baseline reads up to 8.4 deg on rendered pairs (9.1 with every rough-rig tolerance
+# at its extreme), the least refused wrong plane 12.1 deg.
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -144,12 +160,16 @@ class TrustGate:
     Args:
         settings: The ``verification.*`` parameters.
         history: Frames of score history kept.
+        prior: The camera set-up ranges (their focal lengths and principal point: the roll of
+            a ground plane, :meth:`rolled_refusal`); None: the default prior.
 
     """
 
-    def __init__(self, settings: VerificationSettings, history: int = 10) -> None:
+    def __init__(self, settings: VerificationSettings, history: int = 10,
+                 prior: PriorConfig | None = None) -> None:
         """Start with no lock history."""
         self.settings = settings
+        self.prior = prior if prior is not None else PriorConfig()
         self._configs: dict[int, VerificationConfig] = {}
         self._coarse = CoarseAligner(CoarseConfig(width_px=settings.coarse_width_px))
         self._scores: deque[float] = deque(maxlen=history)
@@ -263,7 +283,8 @@ class TrustGate:
             homography: (3, 3) float64 left-to-right plane homography.
             roi: Region of the left image (fractions), as ``features.roi``.
             locked: The plane continues the current lock (warm start), so its score is
-                compared with the lock's median too.
+                compared with the lock's median too, and it is published if accepted: its
+                roll is checked too (:meth:`rolled_refusal`).
 
         Returns:
             The :class:`Verdict`.
@@ -299,7 +320,36 @@ class TrustGate:
                            f'{self.settings.min_score:g})')
         if check.bottom_score < least:
             return Verdict(False, check, bottom, ground=False)
-        return self._one_surface(check) or self._held(check, locked)
+        verdict = self._one_surface(check) or self._held(check, locked)
+        if verdict.accepted and locked:
+            # Last: a warm pair's plane is published if accepted (a search's is checked
+            # once finished, PlaneSearch; its unfinished candidates never).
+            rolled = self.rolled_refusal(homography, width, height)
+            if rolled:
+                return Verdict(False, check, rolled, ground=False)
+        return verdict
+
+    def rolled_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
+        """Return why a ground plane about to be published is refused for its roll ('' if not).
+
+        Its disparity must grow down the image within ``verification.max_ground_roll_deg`` for some
+        focal length of the prior (:func:`~domplane_ros.core.ground_slope.ground_roll_deg`):
+        a level head sees the ground so, a plane through surfaces at several depths and turns
+        (the panels of a room without a floor) mostly not. Only for planes about to be
+        published (a search's finished winner, a challenger, a warm pair's plane); never
+        with ``verification.plane: any``.
+        """
+        bound = self.settings.max_ground_roll_deg
+        if self.settings.plane == 'any' or bound >= 90.0:
+            return ''
+        roll = ground_roll_deg(homography, width, height, self.prior.focal_px,
+                               self.prior.principal_point_px)
+        if abs(roll) <= bound:
+            return ''
+        return (f'not the ground of a level head: its disparity grows {roll:+.0f} deg off '
+                'straight down the image (more than verification.max_ground_roll_deg '
+                f'{bound:g} for every focal length of the prior); a plane through surfaces at '
+                'several depths, or a rolled head?')
 
     @staticmethod
     def _one_surface(check: PlaneVerification) -> Verdict | None:

@@ -18,6 +18,7 @@ from domplane_ros.sim.generators import random_scene, scene_sequence
 from domplane_ros.sim.rigs import plane_error_px, random_rig_error, rough_rig
 from domplane_ros.sim.textures import SIZED_FLOOR_KINDS
 from domplane_ros.stream import search as search_module
+from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import MAX_BELOW_FRACTION_WEAK, weak_below_refusal
 from domplane_ros.stream.verdict import Verdict
@@ -48,6 +49,8 @@ def test_the_rough_heads_plane_through_boxes_is_refused_not_published():
 def test_without_the_refusal_the_wrong_plane_is_published(monkeypatch):
     # The case above is a real one: switched off, the search publishes the wrong plane.
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
+    # Round 18's roll of a published ground plane refuses it too: off, to see this rule alone.
+    monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
     frame = _rough_frame_41(7)
     result = _cold(frame)
     assert result.ok and plane_error_px(frame, result.homography) > WRONG_PX

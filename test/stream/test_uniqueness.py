@@ -35,10 +35,12 @@ def _run(frame):
 def _wrong_without(frame, monkeypatch, *patches):
     """Run the frame with each ``(module, name, value)`` patched: a wrong plane is published.
 
-    Round 17's refusal of a weak finished winner with texture beyond it is off too: it also
-    refuses some of these planes, and the patched rule alone is what is tested.
+    Round 17's refusal of a weak finished winner with texture beyond it and round 18's roll of
+    a published ground plane (``verification.max_ground_roll_deg``) are off too: they also refuse
+    some of these planes, and the patched rule alone is what is tested.
     """
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
+    monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
     for module, name, value in patches:
         monkeypatch.setattr(module, name, value)
     without = _run(frame)
@@ -345,6 +347,8 @@ def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(
     result = pipeline.process(frame.left, frame.right, 0)
     assert not result.ok and 'swapped' in result.reason, result.reason
     monkeypatch.setattr(uniqueness_module, 'MAX_WINNER_BEYOND', math.inf)
+    # Round 18's roll of a published ground plane refuses it too.
+    monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
     frame, pipeline = _faint_both(11)
     without = pipeline.process(frame.left, frame.right, 0)
     # 3.5 px off since the refinement samples the faint floor (round 12; 6.1 px before it):
@@ -365,6 +369,8 @@ def test_a_better_fit_with_texture_beyond_it_makes_the_winner_ambiguous(monkeypa
     assert not result.ok and 'texture beyond it' in result.reason, result.reason
     monkeypatch.setattr(uniqueness_module, 'BEYOND_RIVAL_SHARE', math.inf)
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)  # round 17's refusal
+    # Round 18's roll of a published ground plane refuses it too.
+    monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
     without = PlanePipeline(config).process(frame.left, frame.right, 0)
     assert without.ok and plane_error_px(frame, without.homography) > 5.0
 
