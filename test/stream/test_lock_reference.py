@@ -67,6 +67,13 @@ def test_a_cut_starts_the_new_lock_from_its_own_plane():
         errors.append(plane_error_px(frame, result.homography) if result.ok else None)
     assert all(e is not None and e < 1.0 for e in errors), errors
     assert pipeline.stats.reinitialisations == 2, errors
+    # The lock is lost once, at the cut, and said so: the tiles' lock, tracked into the
+    # checker (the same pose), scores 0.41 there, under 0.7 x the 0.61 it started from; the
+    # search re-finds a plane in that pair.
+    counts = pipeline.stats.refusals
+    assert counts.locks_lost == {**dict.fromkeys(counts.locks_lost, 0), 'reference': 1}, counts
+    assert counts.refound == 1 and counts.last_lock_lost.kind == 'reference'
+    assert 'score 0.41 fell below 0.7 x the 0.61' in counts.last_lock_lost.reason
 
 
 def test_a_changed_verification_scale_searches_again(faint_tiles):
@@ -106,7 +113,8 @@ def test_a_refused_lock_keeps_its_reason_when_the_search_refinds_it(faint_tiles,
     # above is the reference's, not made up).
     monkeypatch.setattr(trust_module, 'LOCK_REFERENCE', False)
     pipeline = PlanePipeline()
-    for index, frame in enumerate(faint_tiles):
-        result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+    off = [pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+           for index, frame in enumerate(faint_tiles)]
+    assert off[4].ok and off[4].warm_start == 'prediction' and not off[4].refusals
     assert pipeline.stats.refusals.locks_lost['reference'] == 0
     assert pipeline.stats.refusals.refound == 0
