@@ -38,3 +38,18 @@ def two_depths(shift_left_px: float, shift_right_px: float) -> tuple[np.ndarray,
         moved = cv2.warpAffine(texture, move, (360, 240), flags=cv2.INTER_LINEAR)[:, 20:340]
         right[:, columns] = moved[:, columns]
     return left, right
+
+
+def drifting_lock_frames():
+    """Return 6 pairs on which a held lock slides off the floor and the gate refuses it.
+
+    evaluate_drift's floors family, tuning seed 33 (32 cm faint tiles, three boxes). Pair 0
+    is the search's plane (0.05 px, score 0.58, 66 % of the bottom); pairs 1-3 stay under
+    0.5 px; in pair 4 the prediction is 2.67 px off and the warm estimate, 2.39 px off, passes
+    the gate with score 0.31 and 11 % of the bottom (the lock's median 0.55 follows it: 0.31
+    is above its half): the lock's reference (stream/trust.py LOCK_REFERENCE) refuses it and
+    the search in the same pair re-finds the floor; without the reference pair 5 is published
+    2.81 px off (docs/BENCHMARKS.md round 18).
+    """
+    from domplane_ros.sim.generators import scene_sequence
+    return scene_sequence(16, 33, floor='tiles_faint_64')[:6]

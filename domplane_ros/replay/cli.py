@@ -330,6 +330,7 @@ class _Run:
         summary.decode_errors = counters.decode_errors
         summary.undecodable_messages = counters.undecodable_messages
         summary.reinitialisations = session.pipeline.stats.reinitialisations
+        summary.refusals = session.pipeline.stats.refusals
         summary.latency_ms = list(self.latencies_ms)
         summary.input_problems = {INPUT_COUNTER_NAMES[name]: count
                                   for name, count in session.counts.items() if count}

@@ -12,6 +12,7 @@ from typing import TextIO
 from domplane_ros.core.estimator import PlaneEstimate
 from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.pipeline import FrameResult
+from domplane_ros.stream.refusals import RefusalCounts, refusals_text
 import numpy as np
 
 PROG = 'plane_replay'
@@ -21,8 +22,11 @@ CSV_COLUMNS = (
     'final_energy', 'converged',
     'h00', 'h01', 'h02', 'h10', 'h11', 'h12', 'h20', 'h21', 'h22',
     'features_ms', 'estimate_ms', 'mask_ms', 'total_ms', 'state', 'warm_start', 'confidence',
-    'reason', 'fast_motion',
+    'reason', 'fast_motion', 'lock_lost', 'refusals',
 )
+# lock_lost: why the lock held before the pair was lost in it ('kind: reason', '' if not);
+# refusals: every refusal that turned the pair's course, a JSON list of 'kind: reason' (the
+# kinds: domplane_ros.stream.refusals).
 
 
 class CsvOutput:
@@ -63,6 +67,8 @@ class CsvOutput:
               for k in ('features', 'estimate', 'mask', 'total')],
             result.state, result.warm_start, f'{result.confidence:.3f}', result.reason,
             int(result.fast_motion),
+            str(result.lock_lost) if result.lock_lost is not None else '',
+            refusals_text(result.refusals),
         ])
         self.rows += 1
 
@@ -114,6 +120,7 @@ class ReplaySummary:
             ``camera_info.topic``, a topic it could not replay, mono16 data far below
             ``image.mono16_bits``).
         last_reason: The last processed pair's reason for having no plane ('' if it had one).
+        refusals: Locks lost and planes refused by kind (:mod:`domplane_ros.stream.refusals`).
 
     """
 
@@ -139,6 +146,7 @@ class ReplaySummary:
     no_pairs: str = ''
     notes: list[str] = field(default_factory=list)
     last_reason: str = ''
+    refusals: RefusalCounts = field(default_factory=RefusalCounts)
 
     @property
     def rate_pairs_per_s(self) -> float:
@@ -165,6 +173,7 @@ class ReplaySummary:
             f'  plane found:     {self.plane_found} ({self.percent(self.plane_found):.1f} %), '
             f'converged {self.converged} ({self.percent(self.converged):.1f} %), '
             f're-initialisations {self.reinitialisations}',
+            *self.refusals.summary_lines(),
             (f'  latency:         median {self.latency_percentile(50):.1f} ms, '
              f'p95 {self.latency_percentile(95):.1f} ms; ' if self.latency_ms
              else '  latency:         n/a (no pair processed); ')

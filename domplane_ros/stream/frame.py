@@ -6,6 +6,7 @@ from dataclasses import dataclass, field
 
 from domplane_ros.core.mask import NOT_MEASURED, overlay, ParallaxMask
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
+from domplane_ros.stream.refusals import Refusal
 import numpy as np
 
 
@@ -50,6 +51,13 @@ class FrameResult:
             ``pipeline.fast_joint_velocity``.
         confidence: The published plane's verification confidence in [0, 1] (0.5 at
             ``verification.min_score``, 1 at 0.1 above it); 0 when no plane was published.
+        refusals: Every refusal that turned this pair's course, in order
+            (:mod:`domplane_ros.stream.refusals`): the warm plane (after its widened retry)
+            or the warm start, the photometric refinement of a lock, the search's finished
+            winner and the search's end. ``reason`` is the last word only: a warm plane
+            refused and re-found by a search in the same pair has a plane, no reason, and
+            its refusal here. Candidates judged inside a search are not listed.
+        lock_lost: Why the lock held before this pair was lost in it, or None.
 
     """
 
@@ -73,6 +81,8 @@ class FrameResult:
     fast_motion: bool = False
     confidence: float = 0.0
     parallax: np.ndarray | None = None
+    refusals: tuple[Refusal, ...] = ()
+    lock_lost: Refusal | None = None
 
     @property
     def n_inliers(self) -> int:
@@ -134,6 +144,14 @@ class PairStep:
     right: np.ndarray = field(default_factory=lambda: np.zeros((0, 0), np.uint8))
     challenge_s: float = 0.0
     track_lost: bool = False  # the previous pair could not be tracked into this one
+    refusals: list[Refusal] = field(default_factory=list)
+    lock_lost: Refusal | None = None
+
+    def refuse(self, kind: str, reason: str) -> Refusal:
+        """Keep a refusal (:mod:`~domplane_ros.stream.refusals`) as the pair's reason so far."""
+        self.reason = reason
+        self.refusals.append(Refusal(kind, reason))
+        return self.refusals[-1]
 
 
 def stage_timings_ms(t0: float, spans: tuple[float, float], t3: float, t4: float, t5: float,

@@ -9,7 +9,7 @@ stream's bookkeeping (pair counters, input-problem counts, the status) lives in
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 import math
 import time
 
@@ -30,9 +30,11 @@ from domplane_ros.stream.detection import (carried_features, detect_features, fu
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import FrameTracker, Tracked
+from domplane_ros.stream.refusals import (challenger_won, CUT, ESTIMATE, GATE, Refusal,
+                                          RefusalCounts, RESET, tracking_ended, view_changed)
 from domplane_ros.stream.search import PlaneSearch, propagate
 from domplane_ros.stream.trust import TrustGate
-from domplane_ros.stream.verdict import Verdict
+from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
 from domplane_ros.stream.warm import WarmFit
 import numpy as np
 
@@ -64,6 +66,8 @@ class PipelineStats:
     predictions: int = 0
     candidates: int = 0
     carried: int = 0  # pairs whose corners were carried from an earlier pair, not detected
+    # Lock losses and refusals by kind (stream/refusals.py).
+    refusals: RefusalCounts = field(default_factory=RefusalCounts)
 
 
 class PlanePipeline:
@@ -96,6 +100,8 @@ class PlanePipeline:
         self._state = SEARCHING
         self._tracking_frames = 0
         self._photometric = False  # the lock is a plane of too few corners (photometric)
+        # A lock dropped between pairs (reset, a changed prior): the next pair's lock loss.
+        self._dropped: Refusal | None = None
         self._searcher = PlaneSearch(lambda: self.config, lambda: self._trust, self._checks,
                                      self.counts, lambda *args: self._warm.estimate(*args))
         self._tracker = FrameTracker()
@@ -126,7 +132,8 @@ class PlanePipeline:
                 or config.initial_homography != self.config.initial_homography
                 or config.verification.plane != self.config.verification.plane
                 or config.verification.scale != self.config.verification.scale):
-            self.reset()
+            self.reset('a changed prior, initial homography, verification.plane or '
+                       'verification.scale dropped the warm start')
             self._checks.clear()
             self._searcher.prior_changed()
         if config.verification != self.config.verification:
@@ -136,10 +143,14 @@ class PlanePipeline:
         self._trust.prior = config.prior
         self.config = config
 
-    def reset(self) -> None:
-        """Drop the warm start: the next frames search the prior."""
+    def reset(self, why: str = 'the warm start was dropped (reset)') -> None:
+        """Drop the warm start: the next frames search the prior.
+
+        A lock dropped here is the next pair's lock loss (kind ``reset``, saying ``why``).
+        """
         if self._last_h is not None or self._state != SEARCHING:
             self.stats.resets += 1
+            self._dropped = Refusal(RESET, why)
         self._last_h = None
         self._last_energy_per_point = None
         self._state = SEARCHING
@@ -180,12 +191,15 @@ class PlanePipeline:
         _check_frame(left, right, joint_speed)
         check = self.checks.check(left, right, stamp_ns, self.config.pipeline)
         if reset or check.reset:
-            self.reset()
+            self.reset('; '.join(check.warnings) if check.reset and check.warnings
+                       else 'the warm start was dropped before this pair (a reset pair)')
+        dropped, self._dropped = self._dropped, None
         self.stats.frames += 1
         cfg = self.config
         fast = joint_speed is not None and abs(joint_speed) > cfg.pipeline.fast_joint_velocity
         if check.refused:
-            return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast)
+            return self._refused(left, stamp_ns, check.refused, check.warnings, t0, fast,
+                                 dropped)
         work = (WorkingImage.of(left, cfg.features.max_width, cfg.features.max_megapixels),
                 WorkingImage.of(right, cfg.features.max_width, cfg.features.max_megapixels))
         feats, track_pts, tracked, carried, spans = self._features(*work)
@@ -196,7 +210,8 @@ class PlanePipeline:
         self._trust.begin_pair(left, right, (work[0].image, work[1].image, work[0].level))
         try:
             step = self._estimate(PairStep(left=left, right=right,
-                                           track_lost=self._track_lost(tracked, feats)),
+                                           track_lost=self._track_lost(tracked, feats),
+                                           lock_lost=dropped),
                                   feats, motions, fast)
         finally:
             self._trust.end_pair()
@@ -208,6 +223,7 @@ class PlanePipeline:
             reason += f' (left {texture_note(left)}; right {texture_note(right)})'
         if not step.keep_previous:
             self._tracker.keep(*work, track_pts, carried)
+        self.stats.refusals.add(step.lock_lost, step.refusals, step.accepted)
         t5 = time.perf_counter()
         return FrameResult(stamp_ns=stamp_ns, ok=step.accepted, homography=h, mask=mask,
                            parallax=parallax, estimate=estimate,
@@ -219,7 +235,8 @@ class PlanePipeline:
                            warnings=check.warnings, left_lines=feats.left_lines,
                            right_lines=feats.right_lines, warm_start=step.warm_start,
                            prediction=step.prediction, candidates=step.candidates,
-                           fast_motion=fast, confidence=step.confidence)
+                           fast_motion=fast, confidence=step.confidence,
+                           refusals=tuple(step.refusals), lock_lost=step.lock_lost)
 
     def _estimate(self, step: PairStep, feats: Features,
                   motions: tuple[np.ndarray, np.ndarray] | None, fast: bool) -> PairStep:
@@ -269,15 +286,18 @@ class PlanePipeline:
         return estimate, h, mask, parallax
 
     def _refused(self, left: np.ndarray, stamp_ns: int, reason: str,
-                 warnings: tuple[str, ...], t0: float, fast: bool) -> FrameResult:
+                 warnings: tuple[str, ...], t0: float, fast: bool,
+                 dropped: Refusal | None) -> FrameResult:
         """Return the failed frame of a refused pair: a failure like any other.
 
         The plane is carried as in the ``'tracking'`` state (or the search goes on); the
-        refused images are not kept for tracking.
+        refused images are not kept for tracking. ``dropped``: the lock dropped before it.
         """
         self.stats.failed += 1
+        step = PairStep(keep_previous=True, reason=reason, lock_lost=dropped)
         if self._state != SEARCHING:
-            self._lose_frame(PairStep(keep_previous=True), None)
+            self._lose_frame(step, None)
+        self.stats.refusals.add(step.lock_lost, (), False)
         empty = np.zeros((0, 2), np.float64)
         total_ms = 1e3 * (time.perf_counter() - t0)
         return FrameResult(stamp_ns=stamp_ns, ok=False, homography=None,
@@ -286,7 +306,7 @@ class PlanePipeline:
                            reason=reason, state=self._state,
                            timings_ms={'features': 0.0, 'tracking': 0.0, 'estimate': 0.0,
                                        'challenge': 0.0, 'mask': 0.0, 'total': total_ms},
-                           warnings=warnings, fast_motion=fast)
+                           warnings=warnings, fast_motion=fast, lock_lost=step.lock_lost)
 
     def _tracking_points(self, left: WorkingImage, right: WorkingImage,
                          corners: tuple[np.ndarray, np.ndarray]
@@ -345,8 +365,8 @@ class PlanePipeline:
             # The previous pair cannot be tracked into this one: the view jumped (a cut). The
             # lock is no warm start here (it slid onto near planes of the new floor, 2.65 and
             # 4.48 px off, and passed the gate): search in this pair.
-            step.reason = 'lost track: the previous pair cannot be tracked into this one'
-            self._start_search()
+            self._start_search(step, step.refuse(
+                CUT, 'lost track: the previous pair cannot be tracked into this one'))
             return
         prediction = propagate(self._last_h, motions)
         if prediction is not None and self._checks.bounds_reason(prediction, size, count=False):
@@ -358,7 +378,7 @@ class PlanePipeline:
         # is stale, and a stale start can slide into a look-alike.
         starts = [('prediction', prediction) if prediction is not None
                   else ('last', self._last_h)]
-        reason = self._checks.too_few_reason(feats)
+        reason = few_corners = self._checks.too_few_reason(feats)
         for name, init in starts if not reason else ():
             # Plain first (a good start costs nothing more); where that is refused, once more
             # with the potential graduated from the same start (a far start's wide basin).
@@ -379,8 +399,8 @@ class PlanePipeline:
             step.estimate, step.warm_start = estimate, name
             if verdict is not None and not verdict.accepted:
                 # A verified lock does not slide into a look-alike: search at once.
-                step.reason = verdict.reason
-                self._start_search()
+                self._start_search(step, step.refuse(verdict.lock_refusal or GATE,
+                                                     verdict.reason))
                 return
             if not reason:
                 self._verified(step, estimate, verdict)
@@ -388,13 +408,19 @@ class PlanePipeline:
                 if self._challenge_step(step, verdict, problem, feats, size, motions):
                     step.challenge_s = time.perf_counter() - started
                 return
+        if reason and reason != few_corners:
+            step.refuse(ESTIMATE, reason)
         # A plane of few corners (too few now, or a photometric lock): refine it photometrically.
-        few = self._photometric or reason == self._checks.too_few_reason(feats)
+        few = self._photometric or reason == few_corners
         if reason and few:
             start = prediction if prediction is not None else self._last_h
             verdict = self._photometric_lock(step, start, size)
             if verdict is not None and verdict.accepted:
                 return
+            if verdict is not None:
+                # Refused: carried as 'tracking' below (a photometric lock, or a pair the view
+                # change does not refute) with the warm reason; the refusal is kept.
+                step.refusals.append(Refusal(verdict.lock_refusal or GATE, verdict.reason))
             if not self._photometric and self._view_changed(step, start, verdict):
                 # A corner lock whose corners are gone, and a textured image that neither the
                 # lock nor its photometric refinement explains: the view changed (a cut to a
@@ -403,7 +429,8 @@ class PlanePipeline:
                 # cut) re-locked after 4 pairs, the lock carried 2 pairs as 'tracking' first.
                 # A blank or textureless pair (a drop-out) says nothing: carried as before.
                 step.reason = reason
-                self._start_search()
+                step.refusals.append(view_changed(reason))
+                self._start_search(step, step.refusals[-1])
                 return
         step.reason = reason
         self._lose_frame(step, prediction)
@@ -512,6 +539,8 @@ class PlanePipeline:
                     done = self._work().finished(step, problem, feats, size, best, verdict)
                     if not self._trust.rolled_refusal(done[0].homography, *size):
                         step.warm_start = 'challenger'
+                        step.lock_lost = challenger_won(verdict.peak_score, CHALLENGE_MARGIN,
+                                                        lock.peak_score)
                         self._trust.reset()
                         self._verified(step, *done)
                         self._challenge = None
@@ -535,7 +564,7 @@ class PlanePipeline:
                 # The carried plane still belongs to the previous frame: track from there.
                 step.keep_previous = True
             return
-        self._start_search()
+        self._start_search(step, tracking_ended(self._tracking_frames - 1, step.reason))
 
     def _problem(self, feats: Features) -> TwoStep | FailedEstimate:
         """Return the two-step iteration over this frame's features, or why there is none."""
@@ -545,7 +574,9 @@ class PlanePipeline:
             feats.right_lines if lines else None, self.config.estimator.line_weight)
 
     # --- Searching -------------------------------------------------------------------------
-    def _start_search(self) -> None:
+    def _start_search(self, step: PairStep, lost: Refusal) -> None:
+        """Drop the lock (``lost``: why, kept as the pair's lock loss): search from now on."""
+        step.lock_lost = lost
         self._state = SEARCHING
         self._trust.lock_lost()
         self._tracking_frames = 0

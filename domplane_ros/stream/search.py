@@ -28,6 +28,7 @@ from domplane_ros.stream.candidates import CandidateWork, photometric_estimate
 from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.health import InputCounts
+from domplane_ros.stream.refusals import Refusal, SEARCH
 from domplane_ros.stream.swap import swap_rivals
 from domplane_ros.stream.trust import TrustGate, weak_below_refusal
 from domplane_ros.stream.verdict import BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, Verdict
@@ -190,7 +191,7 @@ class PlaneSearch:
             refused = ('' if best is None or verdict is None
                        else self._finished_refusal(best, verdict, size))
             if refused:
-                step.reason = refused
+                step.refuse(SEARCH, refused)
                 return None
             return self._done(best, verdict)
         pool, rejection, limit = self._pool(step, search, problem, feats, size, motions)
@@ -240,6 +241,9 @@ class PlaneSearch:
             if not unverified:
                 return self._done(*done)
             search.best = None
+            if len(search.tried) < limit:
+                # The search goes on (else its end says this).
+                step.refusals.append(Refusal(SEARCH, unverified))
         if len(search.tried) < limit:
             step.reason = (f'searching the prior: {len(search.tried)} of {limit} candidates '
                            'refined')
@@ -481,12 +485,12 @@ class PlaneSearch:
         if unverified:
             self._counts.add('swapped_cameras' if 'swapped' in unverified
                              else 'unverified_plane')
-            step.reason = f'search found no verified plane: {unverified}'
+            step.refuse(SEARCH, f'search found no verified plane: {unverified}')
         elif not pool and rejection:
             self._checks.count_rejection(rejection)
-            step.reason = f'prior search found no plane: {rejection}'
+            step.refuse(SEARCH, f'prior search found no plane: {rejection}')
         else:
-            step.reason = 'prior search found no plane'
+            step.refuse(SEARCH, 'prior search found no plane')
         self._search = None
 
 

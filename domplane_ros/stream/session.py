@@ -386,7 +386,7 @@ class StreamSession:
             joint_speed=joint_speed, implausible_joint_speed=implausible_joint_speed,
             implausible_joint_states=implausible_joint_states,
             plane=self.config.verification.plane, image_warning=self.image_warning,
-            silence_hint=silence_hint)
+            silence_hint=silence_hint, refusals=self.pipeline.stats.refusals)
 
 
 def _read_only(image: np.ndarray) -> np.ndarray:

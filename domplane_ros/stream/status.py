@@ -8,6 +8,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.health import input_diagnostic_values
+from domplane_ros.stream.refusals import RefusalCounts
 import numpy as np
 
 # diagnostic_msgs/DiagnosticStatus levels.
@@ -32,7 +33,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
                  implausible_joint_speed: float | None = None,
                  implausible_joint_states: int | None = None, plane: str = 'ground',
                  image_warning: str = '',
-                 silence_hint: Callable[[Sequence[str]], str] | None = None
+                 silence_hint: Callable[[Sequence[str]], str] | None = None,
+                 refusals: RefusalCounts | None = None
                  ) -> tuple[int, str, list[tuple[str, str]]]:
     """Return the node's diagnostics status.
 
@@ -69,6 +71,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         silence_hint: Given the silent cameras' topics, why they may be silent ('' if the
             adapter knows nothing; the node: a publisher with incompatible QoS), said after
             the silence.
+        refusals: Lock losses and refusals since start (:mod:`~domplane_ros.stream.refusals`);
+            with the last result's lock loss they follow ``re-initialisations`` (None: no keys).
 
     Returns:
         ``(level, message, values)``: level 0 OK, 1 WARN (a silent camera, no input, the last
@@ -98,6 +102,8 @@ def plane_status(*, rate: float, latencies_ms: Sequence[float], pairs: int, proc
         *([('joint states implausible', implausible_joint_states)]
           if implausible_joint_states is not None else []),
         ('re-initialisations', reinitialisations),
+        *(refusals.diagnostic_values(getattr(last_result, 'lock_lost', None))
+          if refusals is not None else []),
         ('last error', last_error or 'none'),
         ('image warning', image_warning or 'none'),
     ]

@@ -50,6 +50,7 @@ from domplane_ros.core.verification import (agreement_maps, AgreementMaps, Plane
                                             REASON_LOW_SUPPORT, updated,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
+from domplane_ros.stream.refusals import BOTTOM, DROP, REFERENCE
 from domplane_ros.stream.uniqueness import Judged, Pick, Uniqueness
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
 import numpy as np
@@ -405,7 +406,7 @@ class TrustGate:
         if locked and lock is not None and check.score < self.settings.drop_ratio * lock:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
                            f'below verification.drop_ratio {self.settings.drop_ratio:g} x the '
-                           f"lock's {lock:.2f} (the view changed)")
+                           f"lock's {lock:.2f} (the view changed)", lock_refusal=DROP)
         return (self._below_reference(check) if locked else None) or Verdict(True, check, '')
 
     def record(self, verdict: Verdict) -> None:
@@ -452,12 +453,12 @@ class TrustGate:
         if check.score < LOCK_REFERENCE_RATIO * reference.score:
             return Verdict(False, check, f'plane not verified: score {check.score:.2f} fell '
                            f'below {LOCK_REFERENCE_RATIO:g} x the {reference.score:.2f} the '
-                           'lock started from (a drifting lock?)')
+                           'lock started from (a drifting lock?)', lock_refusal=REFERENCE)
         if check.bottom_score < LOCK_BOTTOM_RATIO * reference.bottom_score:
             return Verdict(False, check, 'not the ground: the plane explains '
                            f'{100 * check.bottom_score:.0f} % of the bottom of the image, under '
                            f'{LOCK_BOTTOM_RATIO:g} x the {100 * reference.bottom_score:.0f} % '
-                           'the lock started from (a drifting lock?)')
+                           'the lock started from (a drifting lock?)', lock_refusal=BOTTOM)
         return None
 
     def coarse_candidates(self, left: np.ndarray, right: np.ndarray, shifted: bool = True,

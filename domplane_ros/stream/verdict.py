@@ -59,6 +59,10 @@ class Verdict:
             only for the texture beyond it, if at least :data:`BEYOND_RIVAL_SHARE` x the
             winner's score (:meth:`Uniqueness.ground_winner`), else 0: the winner finished
             must score at least that share of it to be published.
+        lock_refusal: For a locked plane refused by a hold of the lock, which one:
+            ``'drop'`` (its recent median, ``verification.drop_ratio``), ``'reference'`` or
+            ``'bottom'`` (the plane it started from, ``trust.LOCK_REFERENCE``); else ''
+            (:mod:`domplane_ros.stream.refusals`).
     """
 
     accepted: bool
@@ -69,6 +73,7 @@ class Verdict:
     ground: bool = True
     beyond: bool = False
     beyond_rival: float = 0.0
+    lock_refusal: str = ''
 
     @property
     def confidence(self) -> float:

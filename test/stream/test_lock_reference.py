@@ -12,19 +12,15 @@ from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
 import pytest
-from truth import stream_errors
+from truth import drifting_lock_frames, stream_errors
 
 PERIOD_NS = 33_333_333
 
 
 @pytest.fixture(scope='module')
 def faint_tiles():
-    # evaluate_drift's floors family, tuning seed 33 (32 cm faint tiles, three boxes). Pair 0
-    # is the search's plane (0.05 px, score 0.58, 66 % of the bottom); pairs 1-3 stay under
-    # 0.5 px; in pair 4 the prediction is 2.67 px off and the warm estimate, 2.39 px off, passes
-    # the gate with score 0.31 and 11 % of the bottom (the lock's median 0.55 follows it: 0.31
-    # is above its half), and pair 5 is published 2.81 px off (docs/BENCHMARKS.md round 18).
-    return scene_sequence(16, 33, floor='tiles_faint_64')[:6]
+    # The lock slides off in pair 4 (truth.drifting_lock_frames).
+    return drifting_lock_frames()
 
 
 def test_a_lock_that_loses_its_start_score_is_refused_and_searched(faint_tiles, monkeypatch):
@@ -71,6 +67,13 @@ def test_a_cut_starts_the_new_lock_from_its_own_plane():
         errors.append(plane_error_px(frame, result.homography) if result.ok else None)
     assert all(e is not None and e < 1.0 for e in errors), errors
     assert pipeline.stats.reinitialisations == 2, errors
+    # The lock is lost once, at the cut, and said so: the tiles' lock, tracked into the
+    # checker (the same pose), scores 0.41 there, under 0.7 x the 0.61 it started from; the
+    # search re-finds a plane in that pair.
+    counts = pipeline.stats.refusals
+    assert counts.locks_lost == {**dict.fromkeys(counts.locks_lost, 0), 'reference': 1}, counts
+    assert counts.refound == 1 and counts.last_lock_lost.kind == 'reference'
+    assert 'score 0.41 fell below 0.7 x the 0.61' in counts.last_lock_lost.reason
 
 
 def test_a_changed_verification_scale_searches_again(faint_tiles):
@@ -87,3 +90,31 @@ def test_a_changed_verification_scale_searches_again(faint_tiles):
         assert result.ok and plane_error_px(frame, result.homography) < 1.0
     assert pipeline.stats.reinitialisations == 2
     assert pipeline.state == 'locked'
+
+
+def test_a_refused_lock_keeps_its_reason_when_the_search_refinds_it(faint_tiles, monkeypatch):
+    # Pair 4's warm plane is refused by the lock's reference and the search in the same pair
+    # publishes the floor: the pair has a plane and no reason, so the refusal is kept apart.
+    pipeline = PlanePipeline()
+    results = [pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+               for index, frame in enumerate(faint_tiles)]
+    refound = results[4]
+    assert refound.ok and refound.reason == '' and refound.warm_start == 'search'
+    assert plane_error_px(faint_tiles[4], refound.homography) < 1.0
+    assert [r.kind for r in refound.refusals] == ['reference'], refound.refusals
+    assert 'the lock started from' in refound.refusals[0].reason
+    assert refound.lock_lost == refound.refusals[0]
+    assert all(not r.refusals and r.lock_lost is None for r in results[1:4]), results
+    counts = pipeline.stats.refusals
+    assert counts.locks_lost == {**dict.fromkeys(counts.locks_lost, 0), 'reference': 1}
+    assert counts.planes_refused == {**dict.fromkeys(counts.planes_refused, 0), 'reference': 1}
+    assert counts.refound == 1 and counts.last_lock_lost == refound.lock_lost
+    # Without the reference nothing is refused: the slid plane is published (the refusal
+    # above is the reference's, not made up).
+    monkeypatch.setattr(trust_module, 'LOCK_REFERENCE', False)
+    pipeline = PlanePipeline()
+    off = [pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+           for index, frame in enumerate(faint_tiles)]
+    assert off[4].ok and off[4].warm_start == 'prediction' and not off[4].refusals
+    assert pipeline.stats.refusals.locks_lost['reference'] == 0
+    assert pipeline.stats.refusals.refound == 0

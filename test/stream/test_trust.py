@@ -127,6 +127,9 @@ def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
 def test_a_cut_that_breaks_the_track_searches_at_once(seed):
     results, errors = _cut_run(8, 8, seed)
     assert results[8].reinitialised, results[8].warm_start  # the search ran in the first pair
+    # ... and the pair says why the lock was dropped (its reason is the search's, if any).
+    assert results[8].lock_lost is not None and results[8].lock_lost.kind == 'cut'
+    assert results[8].refusals[0] == results[8].lock_lost
     relock = next(i for i, e in enumerate(errors[8:]) if e is not None and e < 1.0)
     assert relock < 3, errors
     assert results[8 + relock].state == LOCKED
