@@ -123,6 +123,42 @@ def rough_rig(frame: StereoFrame, error: RigError) -> StereoFrame:
                    visible_in_right=frame.visible_in_right & _maps_inside(h, width, height))
 
 
+def rough_left_rig(frame: StereoFrame, error: RigError) -> StereoFrame:
+    """Return the pair the same scene gives with the rough rig's error on the left camera.
+
+    As :func:`rough_rig` with the cameras' roles exchanged: the left image is warped by
+    ``G`` (:func:`rig_warp`, linear interpolation, border black), the true homography becomes
+    ``H G^-1`` and the left-view masks move with the left image (nearest neighbour; the
+    occlusion masks are dropped). The level-head rule reads a left camera's roll against the
+    baseline about twice (docs/METHOD.md), a right camera's not at all; this case measures
+    that.
+
+    Args:
+        frame: A rendered pair from the nominal head.
+        error: The rough rig's deviations, applied to the left camera.
+
+    Returns:
+        The :class:`StereoFrame` (same right image).
+
+    """
+    height, width = frame.left.shape
+    g = rig_warp(error, frame.setup.focal_px, width, height)
+
+    def warped(image: np.ndarray, flags: int) -> np.ndarray:
+        return cv2.warpPerspective(image, g, (width, height), flags=flags,
+                                   borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+
+    def mask(values: np.ndarray) -> np.ndarray:
+        return warped(values.astype(np.uint8), cv2.INTER_NEAREST) > 0
+
+    h = frame.homography @ np.linalg.inv(g)
+    h = h / h[2, 2]
+    return replace(frame, left=warped(frame.left, cv2.INTER_LINEAR), homography=h,
+                   plane_left=mask(frame.plane_left), obstacle_left=mask(frame.obstacle_left),
+                   visible_in_right=mask(frame.visible_in_right) & _maps_inside(h, width, height),
+                   occluded_in_right=None, obstacle_hidden=None)
+
+
 def swapped(frame: StereoFrame) -> StereoFrame:
     """Return the pair with left and right exchanged; the truth is ``H^-1``.
 

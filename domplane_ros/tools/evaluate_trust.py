@@ -10,6 +10,9 @@ OpenCV ORB + MAGSAC++ runs on the same pairs in the same run:
 * ``rough``: the same scenes on a rough head (:func:`domplane_ros.sim.rigs.random_rig_error`:
   roll up to 4 deg, relative pitch up to 2 deg, focal mismatch 3 %, principal points up to
   10 px apart);
+* ``rough_left``: the same errors on the left camera instead
+  (:func:`~domplane_ros.sim.rigs.rough_left_rig`; the level-head rule reads a left camera's
+  roll about twice, a right camera's not at all);
 * ``swapped``: the same scenes with left and right exchanged (truth ``H^-1``);
 * ``lighting``: the same kind of scenes seen by two cameras that see the light differently:
   the right camera's gain 0.8-1.25 and offset -20 to 20 grey levels, and each camera its own
@@ -48,7 +51,7 @@ from domplane_ros.config import one_shot_search, PlaneNodeConfig
 from domplane_ros.sim.generators import random_scene, scene_sequence
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
-                                   random_rig_error, rough_rig, swapped)
+                                   random_rig_error, rough_left_rig, rough_rig, swapped)
 from domplane_ros.sim.textures import FAINT_TILE_KINDS, SIZED_FLOOR_KINDS
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.common import machine_name, one_core, progress
@@ -126,6 +129,8 @@ def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
     makers: dict[str, Callable[[int], StereoFrame]] = {
         'cold': random_scene,
         'rough': lambda s: rough_rig(random_scene(s), random_rig_error(
+            np.random.default_rng((s, 77)))),
+        'rough_left': lambda s: rough_left_rig(random_scene(s), random_rig_error(
             np.random.default_rng((s, 77)))),
         'swapped': lambda s: swapped(random_scene(s)),
         'lighting': lambda s: camera_response(random_scene(s, gain=None, offset=None),

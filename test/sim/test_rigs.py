@@ -5,7 +5,7 @@ from __future__ import annotations
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px, rig_warp,
-                                   RigError, rough_rig, swapped)
+                                   RigError, rough_left_rig, rough_rig, swapped)
 import numpy as np
 import pytest
 
@@ -37,6 +37,24 @@ def test_rough_rig_truth_matches_its_images(scene):
     b = scene.right[old[inside, 1].round().astype(int), old[inside, 0].round().astype(int)]
     assert np.median(np.abs(a.astype(int) - b.astype(int))) <= 12
     # The prior's model error is tens of pixels, not a rounding.
+    assert plane_error_px(rough, scene.homography) > 10.0
+
+
+def test_a_rough_left_camera_carries_its_truth(scene):
+    error = RigError(roll_deg=-3.0, pitch_deg=1.0, focal_ratio=0.98, principal_offset_px=(6, 4))
+    rough = rough_left_rig(scene, error)
+    g = rig_warp(error, scene.setup.focal_px, 320, 240)
+    truth = scene.homography @ np.linalg.inv(g)
+    assert np.allclose(rough.homography, truth / truth[2, 2])
+    assert np.array_equal(rough.right, scene.right)
+    # A floor pixel of the new left image shows the grey level the truth finds in the right.
+    pts = np.argwhere(rough.plane_left & rough.visible_in_right)[::97, ::-1].astype(float)
+    there = apply_homography(rough.homography, pts)
+    inside = ((there[:, 0] > 2) & (there[:, 0] < 317) & (there[:, 1] > 2) & (there[:, 1] < 237)
+              & (pts[:, 0] > 2) & (pts[:, 0] < 317) & (pts[:, 1] > 2) & (pts[:, 1] < 237))
+    a = rough.left[pts[inside, 1].astype(int), pts[inside, 0].astype(int)]
+    b = scene.right[there[inside, 1].round().astype(int), there[inside, 0].round().astype(int)]
+    assert inside.sum() > 50 and np.median(np.abs(a.astype(int) - b.astype(int))) <= 12
     assert plane_error_px(rough, scene.homography) > 10.0
 
 
