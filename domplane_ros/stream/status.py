@@ -8,7 +8,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.health import input_diagnostic_values
-from domplane_ros.stream.refusals import RefusalCounts
+from domplane_ros.stream.refusals import RefusalCounts, refusals_text
 import numpy as np
 
 # diagnostic_msgs/DiagnosticStatus levels.
@@ -244,7 +244,10 @@ def result_status(frame: Any) -> tuple[int, str, list[tuple[str, str]]]:
     (and the reason when there is no plane). The values, all strings: ``state`` (locked,
     tracking, searching), ``plane`` (true or false), ``confidence`` (0 to 1; 0 without a
     plane), ``homography`` (a JSON list of the 9 row-major values of H, left pixel to right
-    pixel with ``H[2][2] = 1``; ``[]`` without a plane) and ``reason`` ('' with a plane).
+    pixel with ``H[2][2] = 1``; ``[]`` without a plane), ``reason`` ('' with a plane),
+    ``lock_lost`` (why the lock held before the pair was lost in it, ``kind: reason``, '' if
+    not; a lock lost and re-found in the same pair has a plane and this) and ``refusals``
+    (every refusal of the pair, a JSON list of ``kind: reason``; the replay CSV's columns).
 
     Args:
         frame: A :class:`~domplane_ros.stream.session.ProcessedPair` (``result``,
@@ -265,4 +268,6 @@ def result_status(frame: Any) -> tuple[int, str, list[tuple[str, str]]]:
         ('plane', 'true' if plane else 'false'),
         ('confidence', repr(float(result.confidence) if plane else 0.0)),
         ('homography', json.dumps(values)),
-        ('reason', reason)])
+        ('reason', reason),
+        ('lock_lost', str(result.lock_lost) if result.lock_lost is not None else ''),
+        ('refusals', refusals_text(result.refusals))])

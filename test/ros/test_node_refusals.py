@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import time
 
+import json
+
+from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.sim.rigs import plane_error_px
 from rclpy.parameter import Parameter
 from test_node import _image, Harness
@@ -38,6 +41,8 @@ def test_node_diagnostics_name_a_lock_refused_and_refound_in_one_pair(ros_contex
     # in the same pair publishes the floor (truth.drifting_lock_frames).
     frames = drifting_lock_frames()[:5]
     h = Harness(ros_context, [Parameter('diagnostics.period_s', value=0.2)])
+    results: list[DiagnosticArray] = []
+    h.driver.create_subscription(DiagnosticArray, 'plane/result', results.append, 10)
     try:
         h.wait_for_subscribers()
         for i, frame in enumerate(frames):
@@ -62,8 +67,18 @@ def test_node_diagnostics_name_a_lock_refused_and_refound_in_one_pair(ros_contex
                 if values.get('processed pairs') == '5':
                     break
         assert values.get('processed pairs') == '5', values
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and last not in _stamps(results):
+            h.executor.spin_once(timeout_sec=0.02)
     finally:
         h.close()
+    # The pair's own result says it too: a plane, the lock lost and its refusals.
+    pair = [r for r in results if _stamps([r]) == [last]]
+    assert pair, _stamps(results)
+    per_pair = {kv.key: kv.value for kv in pair[-1].status[0].values}
+    assert per_pair['plane'] == 'true' and per_pair['lock_lost'] == str(result.lock_lost)
+    assert json.loads(per_pair['refusals']) == [str(r) for r in result.refusals]
+    assert any(r.startswith('reference: ') for r in json.loads(per_pair['refusals']))
     lost = values['lock lost (last frame)']
     assert lost.startswith('reference: plane not verified: score '), values
     assert lost == str(result.lock_lost)
