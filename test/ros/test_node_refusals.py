@@ -6,9 +6,8 @@ waits for its mask), so the node sees every pair in order, as the replay does.
 
 from __future__ import annotations
 
-import time
-
 import json
+import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from domplane_ros.sim.rigs import plane_error_px
