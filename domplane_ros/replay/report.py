@@ -12,7 +12,7 @@ from typing import TextIO
 from domplane_ros.core.estimator import PlaneEstimate
 from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.pipeline import FrameResult
-from domplane_ros.stream.refusals import RefusalCounts, refusals_text
+from domplane_ros.stream.refusals import lock_lost_text, RefusalCounts, refusals_text
 import numpy as np
 
 PROG = 'plane_replay'
@@ -67,7 +67,7 @@ class CsvOutput:
               for k in ('features', 'estimate', 'mask', 'total')],
             result.state, result.warm_start, f'{result.confidence:.3f}', result.reason,
             int(result.fast_motion),
-            str(result.lock_lost) if result.lock_lost is not None else '',
+            lock_lost_text(result.lock_lost),
             refusals_text(result.refusals),
         ])
         self.rows += 1

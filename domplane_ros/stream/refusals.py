@@ -108,6 +108,11 @@ def refusals_text(refusals: Iterable[Refusal]) -> str:
     return json.dumps([str(refusal) for refusal in refusals])
 
 
+def lock_lost_text(lock_lost: Refusal | None) -> str:
+    """Return a pair's lock loss as the CSV column and result value: ``'kind: reason'`` or ''."""
+    return str(lock_lost) if lock_lost is not None else ''
+
+
 @dataclass
 class RefusalCounts:
     """Lock losses and refusals counted since start (every kind present, 0 included).

@@ -8,7 +8,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 from domplane_ros.stream.candidates import PHOTOMETRIC
 from domplane_ros.stream.health import input_diagnostic_values
-from domplane_ros.stream.refusals import RefusalCounts, refusals_text
+from domplane_ros.stream.refusals import lock_lost_text, RefusalCounts, refusals_text
 import numpy as np
 
 # diagnostic_msgs/DiagnosticStatus levels.
@@ -269,5 +269,5 @@ def result_status(frame: Any) -> tuple[int, str, list[tuple[str, str]]]:
         ('confidence', repr(float(result.confidence) if plane else 0.0)),
         ('homography', json.dumps(values)),
         ('reason', reason),
-        ('lock_lost', str(result.lock_lost) if result.lock_lost is not None else ''),
+        ('lock_lost', lock_lost_text(result.lock_lost)),
         ('refusals', refusals_text(result.refusals))])
