@@ -48,7 +48,7 @@ TIGHT_POLISH_RATIO = 0.5
 TIGHT_POLISH_MAX_MOVE_PX = 2.0
 TIGHT_POLISH_MIN_PEAK = 0.97
 
-# Then the photometric refinement (TrustGate.refined: the dense flow left after warping by the
+# Then the photometric refinement (CoarsePlanes.refined: the dense flow left after warping by
 # plane, at full resolution up to CoarseConfig.finish_width_px, 1280 px wide; the figures below
 # are of 640 x 480 pairs, refined at full resolution either way) replaces the plane if it is
 # verified and keeps PHOTOMETRIC_MIN_PEAK of the peak score, up to PHOTOMETRIC_FINISH_ROUNDS
@@ -186,8 +186,8 @@ class CandidateWork:
         """
         for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
             least = PHOTOMETRIC_MIN_PEAK * verdict.peak_score
-            refined = self.trust.refined(step.left, step.right, estimate.homography,
-                                         finish=True)
+            refined = self.trust.planes.refined(step.left, step.right, estimate.homography,
+                                                finish=True)
             if refined is None or check_homography(refined):
                 break
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
@@ -211,9 +211,9 @@ class CandidateWork:
         for start in distinct_starts(starts, size):
             plane = None
             for _ in range(PHOTOMETRIC_ROUNDS):
-                moved = (self.trust.refined(step.left, step.right, start,
-                                            PHOTOMETRIC_FIRST_NEAR_PX) if plane is None
-                         else self.trust.refined(step.left, step.right, plane))
+                moved = (self.trust.planes.refined(step.left, step.right, start,
+                                                   PHOTOMETRIC_FIRST_NEAR_PX) if plane is None
+                         else self.trust.planes.refined(step.left, step.right, plane))
                 if moved is None or check_homography(moved):
                     break
                 plane = moved
@@ -238,8 +238,8 @@ class CandidateWork:
         """
         start = estimate.homography
         for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
-            refined = self.trust.refined(step.left, step.right, estimate.homography,
-                                         finish=True)
+            refined = self.trust.planes.refined(step.left, step.right, estimate.homography,
+                                                finish=True)
             if (refined is None or check_homography(refined)
                     or _median_move(problem, start, refined) > TIGHT_POLISH_MAX_MOVE_PX):
                 break
@@ -261,8 +261,8 @@ class CandidateWork:
         decides what to do with it (:data:`~domplane_ros.stream.search.CONTENDERS`).
         """
         for _ in range(PHOTOMETRIC_FINISH_ROUNDS):
-            refined = self.trust.refined(step.left, step.right, estimate.homography,
-                                         finish=True)
+            refined = self.trust.planes.refined(step.left, step.right, estimate.homography,
+                                                finish=True)
             if refined is None or check_homography(refined):
                 break
             again = self.trust.judge(step.left, step.right, refined, self.config.features.roi)
@@ -289,11 +289,11 @@ class CandidateWork:
         A start within :data:`~domplane_ros.stream.challenge.NEAR_LOCK_PX` of one refined
         already, or of a ``known`` plane, is not refined (the parts of the image often give
         the same plane). ``peaks``: the further shifted alignments' planes instead
-        (:meth:`~domplane_ros.stream.trust.TrustGate.coarse_candidates`).
+        (:meth:`~domplane_ros.stream.coarse_planes.CoarsePlanes.coarse_candidates`).
         """
         out = []
         known = list(known)
-        starts = self.trust.coarse_candidates(step.left, step.right, peaks=peaks)
+        starts = self.trust.planes.coarse_candidates(step.left, step.right, peaks=peaks)
         for start in distinct_starts(starts, size):
             if any(corner_distance_px(start, other, *size) < NEAR_LOCK_PX for other in known):
                 continue

@@ -23,18 +23,17 @@ from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.verification import REASON_LOW_SUPPORT
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC
-from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, COARSE_STEP,
-                                           PRIOR_START, PRIOR_STARTS, SCREEN, Task)
 from domplane_ros.stream.detection import (carried_features, detect_features, full_mask,
                                            level_features)
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.motion import FrameTracker, Tracked
-from domplane_ros.stream.refusals import (challenger_won, CUT, ESTIMATE, GATE, Refusal,
-                                          RefusalCounts, RESET, tracking_ended, view_changed)
+from domplane_ros.stream.lock_challenge import LockChallenge
+from domplane_ros.stream.refusals import (CUT, ESTIMATE, GATE, Refusal, RefusalCounts, RESET,
+                                          tracking_ended, view_changed)
 from domplane_ros.stream.search import PlaneSearch, propagate
 from domplane_ros.stream.trust import TrustGate
-from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
+from domplane_ros.stream.verdict import Verdict
 from domplane_ros.stream.warm import WarmFit
 import numpy as np
 
@@ -105,9 +104,10 @@ class PlanePipeline:
         self._searcher = PlaneSearch(lambda: self.config, lambda: self._trust, self._checks,
                                      self.counts, lambda *args: self._warm.estimate(*args))
         self._tracker = FrameTracker()
-        self._challenge: Challenge | None = None
         self._trust = TrustGate(self.config.verification, prior=self.config.prior)
         self._warm = WarmFit(lambda: self.config, lambda: self._trust, self._work)
+        self._challenge = LockChallenge(lambda: self.config, lambda: self._trust, self._work,
+                                        self._checks, self._searcher.candidates)
 
     @property
     def last_homography(self) -> np.ndarray | None:
@@ -157,7 +157,7 @@ class PlanePipeline:
         self._tracking_frames = 0
         self._photometric = False
         self._searcher.stop()
-        self._challenge = None
+        self._challenge.stop()
         self._tracker.clear()
         self._trust.reset()
 
@@ -496,58 +496,14 @@ class PlanePipeline:
     def _challenge_step(self, step: PairStep, lock: Verdict, problem: TwoStep | FailedEstimate,
                         feats: Features, size: tuple[int, int],
                         motions: tuple[np.ndarray, np.ndarray] | None) -> bool:
-        """Every few locked pairs, let other planes challenge the lock, one task per pair.
+        """Run the lock's challenge task of this pair (stream/lock_challenge.py); lock on a winner.
 
-        See :mod:`domplane_ros.stream.challenge`. The lock was verified in this pair already
-        (``lock``); only the challengers are. Returns whether a task ran in this pair.
+        The lock was verified in this pair already (``lock``). Returns whether a task ran.
         """
-        if isinstance(problem, FailedEstimate) or step.estimate is None:
-            return False
-        if self._challenge is None:
-            if not self._trust.challenge_due():
-                return False
-            self._challenge = Challenge()
-        else:
-            self._challenge.follow(motions)
-        task = self._challenge.next_task()
-        if task is None:
-            self._challenge = None
-            return False
-        if task.kind == COARSE:
-            # The alignment's first step (its forward flow) and the screening share a pair.
-            steps = self._trust.coarse_steps(step.left, step.right)
-            if steps is not None:
-                self._challenge.align(Task(COARSE_STEP, steps=steps),
-                                      step.estimate.homography, size)
-            if self._challenge.take(SCREEN):
-                task = Task(SCREEN)
-        elif task.kind == COARSE_STEP:
-            self._challenge.align(task, step.estimate.homography, size)
-        if task.kind == SCREEN:
-            candidates = self._searcher.candidates(size)
-            self._challenge.add_prior_starts(candidates[i] for i in problem.best_screened(
-                candidates, self.config.prior.screen_threshold_px, PRIOR_STARTS))
-        elif task.kind in (COARSE_START, PRIOR_START):
-            options = (self._work().options if task.kind == PRIOR_START
-                       else self.config.estimator)
-            result = problem.estimate(task.start, options, widen=False)
-            if result.ok and not self._checks.rejection_reason(
-                    result, feats, size, bounds=task.kind == PRIOR_START):
-                best, verdict, _ = self._trust.pick(step.left, step.right, [result],
-                                                    self.config.features.roi)
-                if best is not None and verdict is not None and self._trust.beats(verdict, lock):
-                    done = self._work().finished(step, problem, feats, size, best, verdict)
-                    if not self._trust.rolled_refusal(done[0].homography, *size):
-                        step.warm_start = 'challenger'
-                        step.lock_lost = challenger_won(verdict.peak_score, CHALLENGE_MARGIN,
-                                                        lock.peak_score)
-                        self._trust.reset()
-                        self._verified(step, *done)
-                        self._challenge = None
-                        return True
-        if self._challenge.done:
-            self._challenge = None
-        return True
+        ran, won = self._challenge.step(step, lock, problem, feats, size, motions)
+        if won is not None:
+            self._verified(step, *won)
+        return ran
 
     def _work(self) -> CandidateWork:
         """Return the candidate work on this pair's settings, gate and checks."""
@@ -583,7 +539,7 @@ class PlanePipeline:
         self._last_h = None
         self._last_energy_per_point = None
         self._searcher.stop()
-        self._challenge = None
+        self._challenge.stop()
 
     def _search_step(self, step: PairStep, feats: Features, problem: TwoStep | FailedEstimate,
                      size: tuple[int, int], motions: tuple[np.ndarray, np.ndarray] | None

@@ -269,17 +269,18 @@ class PlaneSearch:
                       ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
         """Judge the winner's period siblings with the pool and pick again (plane ``any``).
 
-        :meth:`TrustGate.siblings`: on a periodic board a look-alike some squares off can win
-        a search that never judged the board's plane; its siblings include that plane, which
-        then wins, or the pick is ambiguous. Once per search.
+        :meth:`~domplane_ros.stream.coarse_planes.CoarsePlanes.siblings`: on a periodic board
+        a look-alike some squares off can win a search that never judged the board's plane;
+        its siblings include that plane, which then wins, or the pick is ambiguous. Once per
+        search.
         """
         if search.siblings_tried:
             return pick()
         search.siblings_tried = True
         size = (step.left.shape[1], step.left.shape[0])
         known = [plane.homography for plane in pool]
-        for sibling in self._trust().siblings(step.left, step.right, best.homography,
-                                              self._config().features.roi):
+        for sibling in self._trust().planes.siblings(step.left, step.right, best.homography,
+                                                     self._config().features.roi):
             if all(corner_distance_px(sibling, other, *size) >= NEAR_LOCK_PX
                    for other in known):
                 pool.append(photometric_estimate(sibling))
@@ -387,7 +388,7 @@ class PlaneSearch:
         """Pick among the coarse planes refined photometrically (corners too few to tell)."""
         trust = self._trust()
         planes = self._work().photometric_planes(
-            step, trust.coarse_candidates(step.left, step.right), size)
+            step, trust.planes.coarse_candidates(step.left, step.right), size)
         if not planes:
             return None, None, ''
         return trust.pick(step.left, step.right, planes, self._config().features.roi, rivals)
@@ -464,7 +465,8 @@ class PlaneSearch:
                 cfg.prior.screen_threshold_px,
                 lambda estimate: self._checks.rejection_reason(estimate, feats, size,
                                                                bounds=False),
-                lambda start: trust.polish(step.left, step.right, start, cfg.features.roi))
+                lambda start: trust.planes.polish(step.left, step.right, start,
+                                                  cfg.features.roi))
         return search.rivals
 
     def _best_so_far(self, search: _Search, problem: TwoStep | FailedEstimate, feats: Features,

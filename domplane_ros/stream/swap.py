@@ -14,7 +14,7 @@ judged.
 
 Where the swapped floor has too few corners to be refined (a checker of large squares: 11
 inliers), its best-screened start is polished photometrically instead
-(:meth:`~domplane_ros.stream.trust.TrustGate.polish`).
+(:meth:`~domplane_ros.stream.coarse_planes.CoarsePlanes.polish`).
 """
 
 from __future__ import annotations

@@ -24,12 +24,17 @@ re-plugged) even if the new score still passes the absolute threshold. Every
 alignment (:class:`~domplane_ros.core.coarse.CoarseAligner`), is refined and verified; if it
 explains clearly more of the image than the lock, the lock is replaced.
 
+The planes the gate judges but does not make (the coarse alignment's candidates, a plane's
+photometric refinement, its period siblings, a photometric polish) are
+:class:`~domplane_ros.stream.coarse_planes.CoarsePlanes`' (:attr:`TrustGate.planes`): they
+share the gate's aligner and its memo of the pair of :meth:`TrustGate.begin_pair`.
+
 With ``verification.plane: any`` the plane need not be the ground (a board, a wall): the
 disparity-slope, bottom and beyond checks are off (so swapped cameras are not detected: they
 cannot be told from one such plane), and a search's winner is judged beside its period
-siblings (:meth:`TrustGate.siblings`, the plane moved by its texture's repeats): on a
-checkerboard a look-alike some squares off wins only if it explains clearly more than they
-do (and it must be one plane, unique in its own region:
+siblings (:meth:`~domplane_ros.stream.coarse_planes.CoarsePlanes.siblings`, the plane moved
+by its texture's repeats): on a checkerboard a look-alike some squares off wins only if it
+explains clearly more than they do (and it must be one plane, unique in its own region:
 :meth:`~domplane_ros.stream.uniqueness.Uniqueness.any_winner`). A plane that explains too
 little of the image may still be verified by its own region (:func:`own_region_verified`: a
 board covering a fifth of a textured room).
@@ -39,17 +44,17 @@ from __future__ import annotations
 
 from collections import deque
 import statistics
-from typing import Any, Callable, Generator, Hashable, Sequence
+from typing import Any, Callable, Hashable, Sequence
 
 from domplane_ros.config import PriorConfig, VerificationSettings
-from domplane_ros.core.coarse import CoarseAligner, CoarseConfig, REFINE_NEAR_PX
+from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
 from domplane_ros.core.ground_slope import ground_roll_deg, swap_evidence
-from domplane_ros.core.periodic import period_vectors
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, AgreementMaps, PlaneVerification,
                                             REASON_LOW_SUPPORT, updated,
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
+from domplane_ros.stream.coarse_planes import CoarsePlanes
 from domplane_ros.stream.refusals import BOTTOM, DROP, REFERENCE
 from domplane_ros.stream.uniqueness import Judged, Pick, Uniqueness
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
@@ -110,11 +115,6 @@ MAX_BELOW_FRACTION_WEAK = 0.015
 MIN_MIDDLE_SHARE = 0.5
 MIN_OUTER_BAND_SCORE = 0.2
 MIN_MIDDLE_TEXTURE = 0.1
-# A plane's period siblings (TrustGate.siblings) are refined photometrically from the plane
-# moved by a repeat of its texture, with the samples' residual flow up to this many working
-# pixels (the repeat under perspective is not one translation; the first photometric
-# refinement of a coarse plane takes the same, stream/candidates.py PHOTOMETRIC_FIRST_NEAR_PX).
-SIBLING_NEAR_PX = 8.0
 # With verification.plane any, a plane that explains too little of the image is still
 # verified when it explains at least MIN_REGION_SCORE of the texture of its own region
 # (PlaneVerification.region_score) and that region covers at least MIN_REGION_FRACTION of the
@@ -179,9 +179,13 @@ class TrustGate:
         self._pair: tuple[np.ndarray, np.ndarray] | None = None
         self._working: WorkingPair | None = None
         self._levels: tuple[np.ndarray, np.ndarray, int] | None = None
-        self._coarse_planes: dict[Any, np.ndarray] = {}
+        self._memo: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
         self._uniqueness = Uniqueness(self._coarse, self._per_pair, self._maps)
+        # The pair's photometric planes (coarse candidates, refinements, siblings, polish),
+        # on this gate's aligner, memo and verification.
+        self.planes = CoarsePlanes(settings, self._coarse, self._per_pair, self._maps,
+                                   self._verify, self.config)
 
     def begin_pair(self, left: np.ndarray, right: np.ndarray,
                    levels: tuple[np.ndarray, np.ndarray, int] | None = None) -> None:
@@ -193,13 +197,13 @@ class TrustGate:
         shrink those halvings (:func:`~domplane_ros.core.verification.working_pair`).
         """
         self._pair, self._working, self._levels = (left, right), None, levels
-        self._coarse_planes = {}
+        self._memo = {}
         self._verified = {}
 
     def end_pair(self) -> None:
         """Forget the pair of :meth:`begin_pair`."""
         self._pair = self._working = self._levels = None
-        self._coarse_planes = {}
+        self._memo = {}
         self._verified = {}
 
     def _per_pair(self, left: np.ndarray, right: np.ndarray, key: Hashable,
@@ -207,9 +211,9 @@ class TrustGate:
         """Return ``compute()``, once per key for the pair of :meth:`begin_pair`."""
         if self._pair is None or self._pair[0] is not left or self._pair[1] is not right:
             return compute()
-        if key not in self._coarse_planes:
-            self._coarse_planes[key] = compute()
-        return self._coarse_planes[key]
+        if key not in self._memo:
+            self._memo[key] = compute()
+        return self._memo[key]
 
     def _working_for(self, left: np.ndarray, right: np.ndarray,
                      config: VerificationConfig) -> WorkingPair | None:
@@ -461,91 +465,6 @@ class TrustGate:
                            'the lock started from (a drifting lock?)', lock_refusal=BOTTOM)
         return None
 
-    def coarse_candidates(self, left: np.ndarray, right: np.ndarray, shifted: bool = True,
-                          peaks: bool = False) -> np.ndarray:
-        """Return (K, 3, 3) planes of the coarse photometric alignment (K = 0 if disabled).
-
-        ``shifted``: also align after the dominant shift (the search); the lock's challenge
-        takes the plain alignment only (measured: the shifted planes cost a warm pair of a
-        cut sequence 4 ms CPU at the median, mostly as extra challengers). ``peaks``: instead,
-        the planes of the further shifted alignments
-        (:meth:`~domplane_ros.core.coarse.CoarseAligner.peak_candidates`), for a search in
-        doubt.
-        """
-        if not self.settings.coarse_candidates or left.shape != right.shape:
-            return np.zeros((0, 3, 3))
-        key = 'peaks' if peaks else shifted
-        if self._pair is None or self._pair[0] is not left or self._pair[1] is not right:
-            return self._coarse_planes_of(left, right, key)
-        if key not in self._coarse_planes:  # once per pair of begin_pair
-            self._coarse_planes[key] = self._coarse_planes_of(left, right, key)
-        return self._coarse_planes[key].copy()
-
-    def _coarse_planes_of(self, left: np.ndarray, right: np.ndarray, key: bool | str
-                          ) -> np.ndarray:
-        if key == 'peaks':
-            return self._coarse.peak_candidates(left, right)
-        return self._coarse.candidates(left, right, bool(key))
-
-    def coarse_steps(self, left: np.ndarray, right: np.ndarray
-                     ) -> Generator[None, None, np.ndarray] | None:
-        """Return the plain coarse alignment as resumable steps (the lock's challenge).
-
-        :meth:`CoarseAligner.plain_steps`: ``coarse_candidates(left, right, shifted=False)``
-        spread over two ``next()`` calls; None if the coarse candidates are disabled or the
-        images differ in size.
-        """
-        if not self.settings.coarse_candidates or left.shape != right.shape:
-            return None
-        return self._coarse.plain_steps(left, right)
-
-    def refined(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                near_px: float = REFINE_NEAR_PX, finish: bool = False) -> np.ndarray | None:
-        """Return the plane's photometric refinement (:meth:`CoarseAligner.refine`), unverified.
-
-        ``finish``: a search's winner, refined at the finishing width.
-        """
-        return self._coarse.refine(left, right, homography, near_px, finish)
-
-    def siblings(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-                 roi: Sequence[float] | None = None) -> list[np.ndarray]:
-        """Return the plane's period siblings: the plane moved by its texture's repeats.
-
-        On a periodic texture a look-alike some periods off explains much of the pattern; the
-        true plane is then among its siblings (and explains more: the pattern's border, the
-        rest of it). The repeats are :func:`~domplane_ros.core.periodic.period_vectors` of
-        the left image over the plane's support (at the verification's working width); each
-        of ``+-p1``, ``+-p2``, ``+-(p1 + p2)``, ``+-(p1 - p2)`` moves the plane in the right
-        image and is refined photometrically (:meth:`refined`, :data:`SIBLING_NEAR_PX`).
-        Unverified: the caller judges them. Cached for the pair of :meth:`begin_pair`.
-
-        Returns:
-            (3, 3) float64 homographies (none when the texture does not repeat).
-
-        """
-        key = ('siblings', np.asarray(homography, np.float64).tobytes())
-        same = self._pair is not None and self._pair[0] is left and self._pair[1] is right
-        cached = self._coarse_planes.get(key) if same else None
-        if cached is not None:
-            return list(cached)
-        maps = self._maps(left, right, homography, roi)
-        scale = left.shape[1] / maps.left.shape[1]
-        vectors = scale * period_vectors(maps.left, maps.support)
-        shifts = list(vectors)
-        if len(vectors) == 2:
-            shifts += [vectors[0] + vectors[1], vectors[0] - vectors[1]]
-        out = []
-        for shift in shifts:
-            for sign in (1.0, -1.0):
-                dx, dy = sign * shift
-                moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ homography
-                refined = self._coarse.refine(left, right, moved, SIBLING_NEAR_PX)
-                if refined is not None:
-                    out.append(refined)
-        if same:
-            self._coarse_planes[key] = np.array(out).reshape(-1, 3, 3)
-        return out
-
     def challenge_due(self) -> bool:
         """Return whether the lock is challenged in this frame."""
         period = self.settings.challenge_period
@@ -607,35 +526,6 @@ class TrustGate:
             return None, None, ''
         closest = max(reasons, key=lambda v: v.score)
         return None, None, closest.reason
-
-    def polish(self, left: np.ndarray, right: np.ndarray, homography: np.ndarray,
-               roi: Sequence[float] | None = None) -> np.ndarray:
-        """Return the best-scoring of a plane moved by up to one probe step in the right image.
-
-        A photometric polish for a start the corners cannot refine: the plane and its eight
-        neighbours ``T(d) H`` (``d`` on a grid of half a working pixel of the verification,
-        in full pixels: 2 px at 640 x 480) are verified and the best returned.
-
-        Args:
-            left: (H, W) uint8 left image.
-            right: (H, W) uint8 right image.
-            homography: (3, 3) float64 start homography.
-            roi: Region of the left image (fractions), as ``features.roi``.
-
-        Returns:
-            (3, 3) float64 homography.
-
-        """
-        config = self.config(left.shape[1])
-        step = 0.5 * left.shape[1] / config.working_width_px
-        best, best_score = homography, -1.0
-        for dx in (-step, 0.0, step):
-            for dy in (-step, 0.0, step):
-                moved = np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]]) @ homography
-                score = self._verify(left, right, moved, roi).peak_score
-                if score > best_score:
-                    best, best_score = moved / moved[2, 2], score
-        return best
 
     def beats(self, challenger: Verdict, lock: Verdict) -> bool:
         """Return whether a challenger explains clearly more of the image than the lock.

@@ -247,7 +247,7 @@ class Uniqueness:
         A plane fitted through surfaces at several depths (the far field of a room) passes
         the verification's working scale; its supporting pixels are then about a pixel off it
         and off its photometric refinement
-        (:meth:`~domplane_ros.stream.trust.TrustGate.refined`) alike
+        (:meth:`~domplane_ros.stream.coarse_planes.CoarsePlanes.refined`) alike
         (:func:`~domplane_ros.core.flatness.residual_flow_px` of the refinement). The ground
         checks refuse such planes in ``ground`` mode, so this runs in ``any`` mode only
         (:meth:`any_winner`). Once per plane and pair.

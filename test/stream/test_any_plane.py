@@ -90,14 +90,15 @@ def test_a_look_alike_loses_to_its_period_sibling_the_board():
     assert truth.accepted
     # The board's siblings are its look-alikes some squares off; the best explains as much
     # (this board nearly fills the view: little of its border is seen).
-    looks = gate.siblings(frame.left, frame.right, frame.homography)
+    looks = gate.planes.siblings(frame.left, frame.right, frame.homography)
     errors = [plane_error_px(frame, h) for h in looks]
     assert looks and min(errors) > 5.0
     alike = max(looks, key=lambda h: gate.judge(frame.left, frame.right, h).score)
     # Alone, the verified look-alike would be published; beside its own siblings (which the
     # search adds in any mode) it is not.
     alone, _, _ = gate.pick(frame.left, frame.right, [photometric_estimate(alike)])
-    siblings = [photometric_estimate(h) for h in gate.siblings(frame.left, frame.right, alike)]
+    siblings = [photometric_estimate(h)
+                for h in gate.planes.siblings(frame.left, frame.right, alike)]
     best, _, reason = gate.pick(frame.left, frame.right, [photometric_estimate(alike)]
                                 + siblings)
     assert alone is not None
@@ -169,7 +170,7 @@ def test_a_look_alike_loses_in_its_region_to_the_board_even_if_the_board_is_no_o
     # compete by its score; a look-alike some squares off is one plane and verified.
     frame = board_scene(13, 320, 240)
     gate = TrustGate(ANY)
-    looks = gate.siblings(frame.left, frame.right, frame.homography)
+    looks = gate.planes.siblings(frame.left, frame.right, frame.homography)
     alike = min(looks, key=lambda h: plane_error_px(frame, h))  # one square off: 29 px
     assert plane_error_px(frame, alike) > 5.0
     assert gate.judge(frame.left, frame.right, alike).accepted

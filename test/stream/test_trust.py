@@ -253,7 +253,7 @@ def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
         yield
         return np.stack(near + far)
 
-    monkeypatch.setattr(pipeline._trust, 'coarse_steps', aligned)
+    monkeypatch.setattr(pipeline._trust.planes, 'coarse_steps', aligned)
     starts = []
     original = TwoStep.estimate
 
