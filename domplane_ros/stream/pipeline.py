@@ -27,8 +27,8 @@ from domplane_ros.stream.detection import (carried_features, detect_features, fu
                                            level_features)
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
-from domplane_ros.stream.motion import FrameTracker, Tracked
 from domplane_ros.stream.lock_challenge import LockChallenge
+from domplane_ros.stream.motion import FrameTracker, Tracked
 from domplane_ros.stream.refusals import (CUT, ESTIMATE, GATE, Refusal, RefusalCounts, RESET,
                                           tracking_ended, view_changed)
 from domplane_ros.stream.search import PlaneSearch, propagate
