@@ -133,6 +133,7 @@ class VerificationSettings(_Section):
     coarse_candidates: bool = True
     coarse_width_px: int = 320
     max_ground_roll_deg: float = 10.0
+    prior_slope_margin: float = 0.5
 
 
 @dataclass(frozen=True)

@@ -174,6 +174,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'about twice (both cameras rolled alike too); raise it for a rolling head; 90 '
               'switches the check off.',
               1.0, 90.0),
+    ParamSpec('verification.prior_slope_margin', 0.5, 'float',
+              "Ground mode: how far the ground's disparity slope (its growth per image row, "
+              "(b/h) cos(tilt)) may lie outside the range the prior's baseline_over_height and "
+              'tilt_deg give, as a fraction: a plane whose slope is below the least / (1 + '
+              'margin) or above the greatest x (1 + margin) for every focal length of the prior '
+              'is refused (a plane through distant structure, almost at infinity, has a slope '
+              'near 0). Narrow the prior to make it bite; 100 switches it off in effect.',
+              0.0, 100.0),
     # Mask.
     ParamSpec('mask.scale', 0.5, 'float',
               'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),

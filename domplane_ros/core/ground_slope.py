@@ -14,6 +14,7 @@ Nothing here imports ROS; the functions take numpy arrays and return frozen valu
 from __future__ import annotations
 
 from dataclasses import dataclass
+import math
 from typing import Sequence
 
 from domplane_ros.core.homography import as_valid_homography
@@ -135,6 +136,70 @@ def ground_roll_deg(homography: np.ndarray, width: int, height: int,
             is not positive or the focal range is not positive.
 
     """
+    across, down, m10 = _model_terms(homography, width, height, focal_px,
+                                     principal_point_px, samples)
+    rolls = np.degrees(np.arctan2(across + m10 * down, down))
+    return float(rolls[int(np.argmin(np.abs(rolls)))])
+
+
+def ground_slope_range(homography: np.ndarray, width: int, height: int,
+                       focal_px: tuple[float, float], principal_point_px: Sequence[float] = (),
+                       samples: int = ROLL_FOCAL_SAMPLES) -> tuple[float, float]:
+    """Return the least and greatest disparity slope of a ground plane over the focal range.
+
+    The slope is ``c n_y`` of :func:`ground_roll_deg`'s model, i.e. ``(b / h) cos(tilt)`` for
+    the ground of a level head: the growth of the disparity per image row, without the right
+    camera's roll, its focal mismatch and the vergence (taken out per focal length of the
+    prior, as for the roll). It does not depend on the image's scale (a crop or a pyramid
+    level reads the same); the prior's ranges of ``b / h`` and tilt bound it
+    (:func:`prior_slope_bounds`). A plane far beyond the ground (a plane through distant
+    structure, almost at infinity) has a slope near 0.
+
+    Args:
+        homography: (3, 3) float left-to-right plane homography.
+        width: Image width in pixels.
+        height: Image height in pixels.
+        focal_px: (min, max) focal length range of the prior, pixels.
+        principal_point_px: The prior's ``(cx, cy)``, or empty for the image centre.
+        samples: Focal lengths sampled (geometric spacing).
+
+    Returns:
+        ``(least, greatest)`` slope over the sampled focal lengths (pixels per pixel).
+
+    Raises:
+        ValueError: As :func:`ground_roll_deg`.
+
+    """
+    down = _model_terms(homography, width, height, focal_px, principal_point_px, samples)[1]
+    return float(down.min()), float(down.max())
+
+
+def prior_slope_bounds(baseline_over_height: tuple[float, float],
+                       tilt_deg: tuple[float, float]) -> tuple[float, float]:
+    """Return the least and greatest ground disparity slope ``(b / h) cos(tilt)`` of a prior.
+
+    Args:
+        baseline_over_height: The prior's (min, max) baseline over camera height.
+        tilt_deg: The prior's (min, max) tilt of the head below the horizon, degrees.
+
+    Returns:
+        ``(least, greatest)`` slope (pixels per pixel) over the prior's ranges.
+
+    """
+    low_bh, high_bh = (float(v) for v in baseline_over_height)
+    low_t, high_t = (math.radians(float(v)) for v in tilt_deg)
+    cos_least = min(math.cos(low_t), math.cos(high_t))
+    cos_greatest = 1.0 if low_t <= 0.0 <= high_t else max(math.cos(low_t), math.cos(high_t))
+    return low_bh * max(cos_least, 0.0), high_bh * cos_greatest
+
+
+def _model_terms(homography: np.ndarray, width: int, height: int,
+                 focal_px: tuple[float, float], principal_point_px: Sequence[float],
+                 samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return ``c n_x`` (with the roll), ``c n_y`` and ``M[1, 0]`` per sampled focal length.
+
+    See :func:`ground_roll_deg` for the model; arrays of ``samples`` values.
+    """
     hom = as_valid_homography(homography)
     if width < 1 or height < 1:
         raise ValueError(f'image size must be positive, got {width} x {height}')
@@ -161,6 +226,4 @@ def ground_roll_deg(homography: np.ndarray, width: int, height: int,
     m00 = (cos * g00 - sin * g20) / scale
     m01 = (cos * g01 - sin * g21) / scale
     m10 = g10 / scale
-    across, down = 1.0 - m00, -(m01 + m10)
-    rolls = np.degrees(np.arctan2(across + m10 * down, down))
-    return float(rolls[int(np.argmin(np.abs(rolls)))])
+    return 1.0 - m00, -(m01 + m10), np.broadcast_to(m10, focals.shape)

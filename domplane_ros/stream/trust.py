@@ -48,7 +48,8 @@ from typing import Any, Callable, Hashable, Sequence
 
 from domplane_ros.config import PriorConfig, VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
-from domplane_ros.core.ground_slope import ground_roll_deg, swap_evidence
+from domplane_ros.core.ground_slope import (ground_roll_deg, ground_slope_range,
+                                            prior_slope_bounds, swap_evidence)
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, AgreementMaps, PlaneVerification,
                                             REASON_LOW_SUPPORT, updated,
@@ -329,10 +330,48 @@ class TrustGate:
         if verdict.accepted and locked:
             # Last: a warm pair's plane is published if accepted (a search's is checked
             # once finished, PlaneSearch; its unfinished candidates never).
-            rolled = self.rolled_refusal(homography, width, height)
+            rolled = self.ground_refusal(homography, width, height)
             if rolled:
                 return Verdict(False, check, rolled, ground=False)
         return verdict
+
+    def ground_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
+        """Return why a plane about to be published is not the prior's ground ('' if it is).
+
+        Its roll (:meth:`rolled_refusal`) and its disparity slope (:meth:`slope_refusal`).
+        """
+        return (self.rolled_refusal(homography, width, height)
+                or self.slope_refusal(homography, width, height))
+
+    def slope_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
+        """Return why a ground plane is refused for its disparity slope ('' if not).
+
+        The slope ``(b / h) cos(tilt)``
+        (:func:`~domplane_ros.core.ground_slope.ground_slope_range`, over the prior's focal
+        lengths) must lie within the prior's range
+        (:func:`~domplane_ros.core.ground_slope.prior_slope_bounds`) widened by
+        ``verification.prior_slope_margin``: a plane through distant structure (almost at
+        infinity: slope near 0) or far steeper than the prior's ground is not that ground.
+        Never with ``verification.plane: any``.
+        """
+        if self.settings.plane == 'any':
+            return ''
+        widen = 1.0 + self.settings.prior_slope_margin
+        least, greatest = prior_slope_bounds(self.prior.baseline_over_height,
+                                             self.prior.tilt_deg)
+        low, high = ground_slope_range(homography, width, height, self.prior.focal_px,
+                                       self.prior.principal_point_px)
+        if high < least / widen:
+            return (f'not the ground of the prior: its disparity grows {high:.3f} px per row, '
+                    f'less than the least the prior allows ({least:.3f} / (1 + '
+                    f'verification.prior_slope_margin {self.settings.prior_slope_margin:g})); a '
+                    'plane through distant structure, or a prior too narrow?')
+        if low > greatest * widen:
+            return (f'not the ground of the prior: its disparity grows {low:.3f} px per row, '
+                    f'more than the greatest the prior allows ({greatest:.3f} x (1 + '
+                    f'verification.prior_slope_margin {self.settings.prior_slope_margin:g})); a '
+                    'plane through near structure, or a prior too narrow?')
+        return ''
 
     def rolled_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
         """Return why a ground plane about to be published is refused for its roll ('' if not).
