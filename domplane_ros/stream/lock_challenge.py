@@ -9,7 +9,7 @@ screening, or one start refined on the pair's features, checked, verified
 (:meth:`~domplane_ros.stream.trust.TrustGate.pick`) and taken if it beats the lock
 (:meth:`~domplane_ros.stream.trust.TrustGate.beats`), once finished, like a search's winner
 (:meth:`~domplane_ros.stream.candidates.CandidateWork.finished`), and only if it is a ground
-plane of a level head (:meth:`~domplane_ros.stream.trust.TrustGate.rolled_refusal`). The
+plane of the prior (:meth:`~domplane_ros.stream.trust.TrustGate.ground_refusal`). The
 pipeline publishes the winner and locks on it.
 """
 

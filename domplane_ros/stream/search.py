@@ -365,8 +365,8 @@ class PlaneSearch:
                           ) -> str:
         """Return why a finished winner is not published ('' if it is).
 
-        :func:`_finish_refusal`, then the gate's roll of a ground plane
-        (:meth:`~domplane_ros.stream.trust.TrustGate.rolled_refusal`): both only on the plane
+        :func:`_finish_refusal`, then the gate's roll and slope of a ground plane
+        (:meth:`~domplane_ros.stream.trust.TrustGate.ground_refusal`): both only on the plane
         about to be published, never on the pick's unfinished candidates.
         """
         return (_finish_refusal(verdict)
