@@ -428,16 +428,15 @@ def test_a_biased_winner_is_moved_onto_the_floor_photometrically(monkeypatch):
     assert without.ok and plane_error_px(frame, without.homography) > 2.0
 
 
-@pytest.mark.parametrize('case, name, value', [
-    ('cold 73', 'PHOTOMETRIC_MIN_PEAK', 1.05), ('rough 59', 'PHOTOMETRIC_FINISH_ROUNDS', 1)])
-def test_the_refinement_keeps_97_percent_of_the_peak_and_runs_twice(monkeypatch, counted_score,
-                                                                    case, name, value):
+@pytest.mark.parametrize('case, name, value', [('cold 73', 'PHOTOMETRIC_MIN_PEAK', 1.05)])
+def test_the_refinement_keeps_97_percent_of_the_peak(monkeypatch, counted_score, case, name,
+                                                     value):
     # Tuning seeds published 1.0-1.3 px off before the seventh round. Cold 73: the refinement
     # raises the peak score by 1.6 % only and moves the plane 1.31 -> 0.83 px; taken only
-    # with a 5 % higher peak score (the old rule) it is not. Rough 59: the second round moves
-    # it 1.17 -> 0.71 px; refined once, it stays over a pixel off. Measured with the
-    # refinement's samples over a gradient of 20 (since the twelfth round 4, with which one
-    # round already comes within a pixel on rough 59).
+    # with a 5 % higher peak score (the old rule) it is not. Measured with the refinement's
+    # samples over a gradient of 20 (since the twelfth round 4). (Rough 59's second round,
+    # 1.17 -> 0.71 px with OpenCV 5.0, comes within 0.81 px in one round with OpenCV 5.1:
+    # the second round's test is below.)
     monkeypatch.setattr(trust_module, 'CoarseConfig',
                         partial(coarse_module.CoarseConfig, refine_min_gradient=20.0))
     kind, seed = case.split()
@@ -452,6 +451,24 @@ def test_the_refinement_keeps_97_percent_of_the_peak_and_runs_twice(monkeypatch,
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
     without = PlanePipeline().process(frame.left, frame.right, 0)
     assert without.ok and plane_error_px(frame, without.homography) > 1.1
+
+
+@pytest.mark.parametrize('seed', [17, 34])
+def test_the_refinement_runs_twice(monkeypatch, seed):
+    # Rough rigs, default settings (OpenCV 5.1, session 19's scan of tuning seeds 0-59): the
+    # second photometric round of a search's winner more than halves its error on these two
+    # (0.165 against 0.361 px, 0.116 against 0.297 px refined once; no seed of the 60 stays
+    # over a pixel refined once).
+    frame = rough_rig(random_scene(seed), random_rig_error(np.random.default_rng((seed, 77))))
+    result = PlanePipeline().process(frame.left, frame.right, 0)
+    assert result.ok, result.reason
+    twice = plane_error_px(frame, result.homography)
+    monkeypatch.setattr(candidates_module, 'PHOTOMETRIC_FINISH_ROUNDS', 1)
+    # Round 17's refusal of a weak finished winner with texture beyond it: off, so that the
+    # refinement alone is what is compared.
+    monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
+    once = PlanePipeline().process(frame.left, frame.right, 0)
+    assert once.ok and twice < 0.25 and plane_error_px(frame, once.homography) > 1.8 * twice
 
 
 def test_a_cut_to_a_floor_of_few_corners_relocks_photometrically(monkeypatch):
