@@ -180,7 +180,8 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'tilt_deg give, as a fraction: a plane whose slope is below the least / (1 + '
               'margin) or above the greatest x (1 + margin) for every focal length of the prior '
               'is refused (a plane through distant structure, almost at infinity, has a slope '
-              'near 0). Narrow the prior to make it bite; 100 switches it off in effect.',
+              'near 0). Narrow the prior to make it bite; widen it for a low head with a wide '
+              'baseline (the default refuses above 0.59: b/h 0.6 looking ahead); 100 is off.',
               0.0, 100.0),
     # Mask.
     ParamSpec('mask.scale', 0.5, 'float',

@@ -150,8 +150,11 @@ def ground_slope_range(homography: np.ndarray, width: int, height: int,
     The slope is ``c n_y`` of :func:`ground_roll_deg`'s model, i.e. ``(b / h) cos(tilt)`` for
     the ground of a level head: the growth of the disparity per image row, without the right
     camera's roll, its focal mismatch and the vergence (taken out per focal length of the
-    prior, as for the roll). It does not depend on the image's scale (a crop or a pyramid
-    level reads the same); the prior's ranges of ``b / h`` and tilt bound it
+    prior, as for the roll). It does not depend on the image's scale (a pyramid level reads
+    the same); a principal point ``dy`` pixels off the prior's (a crop that moves the image
+    centre, when ``principal_point_px`` is not set) shifts it by about ``dy sin(v) / f`` for a
+    vergence ``v`` (0.021 for the lower half of 640 x 480 at f 400 and 4 deg; nothing for a
+    rectified head); the prior's ranges of ``b / h`` and tilt bound it
     (:func:`prior_slope_bounds`). A plane far beyond the ground (a plane through distant
     structure, almost at infinity) has a slope near 0.
 

@@ -352,9 +352,10 @@ class TrustGate:
         (:func:`~domplane_ros.core.ground_slope.prior_slope_bounds`) widened by
         ``verification.prior_slope_margin``: a plane through distant structure (almost at
         infinity: slope near 0) or far steeper than the prior's ground is not that ground.
-        Never with ``verification.plane: any``.
+        Never with ``verification.plane: any`` nor with a margin of 100 (the parameter's
+        greatest: off, as a slope at or below 0 is otherwise refused whatever the margin).
         """
-        if self.settings.plane == 'any':
+        if self.settings.plane == 'any' or self.settings.prior_slope_margin >= 100.0:
             return ''
         widen = 1.0 + self.settings.prior_slope_margin
         least, greatest = prior_slope_bounds(self.prior.baseline_over_height,
