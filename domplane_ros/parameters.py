@@ -176,12 +176,12 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               1.0, 90.0),
     ParamSpec('verification.prior_slope_margin', 0.5, 'float',
               "Ground mode: how far the ground's disparity slope (its growth per image row, "
-              "(b/h) cos(tilt)) may lie outside the range the prior's baseline_over_height and "
-              'tilt_deg give, as a fraction: a plane whose slope is below the least / (1 + '
-              'margin) or above the greatest x (1 + margin) for every focal length of the prior '
-              'is refused (a plane through distant structure, almost at infinity, has a slope '
-              'near 0). Narrow the prior to make it bite; widen it for a low head with a wide '
-              'baseline (the default refuses above 0.59: b/h 0.6 looking ahead); 100 is off.',
+              "(b/h) cos(tilt)) may lie below the least that the prior's baseline_over_height and "
+              'tilt_deg give, as a fraction: a plane whose slope is below that least / (1 + '
+              'margin) for every focal length of the prior is refused (a plane through distant '
+              'structure, almost at infinity, has a slope near 0; the default prior refuses '
+              'below 0.021 px per row). Narrow the prior to make it bite; no upper bound; 100 is '
+              'off.',
               0.0, 100.0),
     # Mask.
     ParamSpec('mask.scale', 0.5, 'float',
