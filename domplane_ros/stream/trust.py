@@ -150,6 +150,9 @@ LOCK_BOTTOM_RATIO = 0.4
 # proof. The default 10 (round 19, review rreview19; 8 in round 18): a left camera rolled 4 deg
 # against the baseline reads up to 8.4 deg on rendered pairs (9.1 with every rough-rig tolerance
 # at its extreme), the least refused wrong plane 12.1 deg.
+# Whether the scores divide by the textured pixels both cameras see (VerificationConfig.covisible,
+# core/verification.py step 7) rather than by all textured pixels. Round 20: docs/BENCHMARKS.md.
+COVISIBLE_SCORE = False
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -260,7 +263,8 @@ class TrustGate:
                 working_width_px=min(working, width),
                 reject_score=self.settings.min_score - 0.1,
                 accept_score=self.settings.min_score + 0.1,
-                weight_by_contrast=self.settings.plane != 'any')
+                weight_by_contrast=self.settings.plane != 'any',
+                covisible=COVISIBLE_SCORE)
         return self._configs[width]
 
     def reset(self) -> None:
