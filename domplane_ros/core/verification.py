@@ -41,7 +41,8 @@ Method (all at a working width of :attr:`VerificationConfig.working_width_px`):
    sideways probes accept more true planes but tell planes 2 px apart less well: measured on
    60 rendered scenes, the true plane beat the plane moved 2 px sideways by 1.2 times in
    35 % of them by the score, in all of them by the peak score.
-7. With :attr:`VerificationConfig.covisible` (off by default) the score, the peak score and
+7. With :attr:`VerificationConfig.covisible` (off here by default; the pipeline sets it,
+   ``stream/trust.py`` ``COVISIBLE_SCORE``) the score, the peak score and
    the band scores divide by the textured pixels that map inside the right image (the pixels
    both cameras see), not by all textured ones: with a vertical offset or a roll between the
    cameras the near ground leaves the right image, and each of its pixels counted against

@@ -38,8 +38,7 @@ def test_a_vertical_offset_no_longer_counts_the_near_road_against_the_truth(offs
     see: 0.275 (accepted). The bottom band, where the road leaves, gains most.
     """
     pair = offset_pair
-    config = _gate_config(pair.left.shape[1])
-    assert not config.covisible
+    config = replace(_gate_config(pair.left.shape[1]), covisible=False)
     counted = verification.verify_plane(pair.left, pair.right, pair.truth, config)
     covisible = verification.verify_plane(pair.left, pair.right, pair.truth,
                                           replace(config, covisible=True))
@@ -72,7 +71,7 @@ def test_a_plane_mapping_mostly_outside_cannot_score_on_what_it_maps_inside():
     strip = width // 5
     right[:, :strip] = left[:, width - strip:]
     wrong = _translate(-(width - strip), 0.0)
-    config = _gate_config(width)
+    config = replace(_gate_config(width), covisible=False)
     covisible = replace(config, covisible=True)
     assert verification.verify_plane(left, right, np.eye(3), covisible).accepted
     counted = verification.verify_plane(left, right, wrong, config)
@@ -96,7 +95,7 @@ def test_the_score_divides_by_what_the_plane_maps_inside():
     right = np.zeros_like(left)
     right[:, :width - shift] = left[:, shift:]
     plane = _translate(-shift, 0.0)
-    config = _gate_config(width)
+    config = replace(_gate_config(width), covisible=False)
     counted = verification.verify_plane(left, right, plane, config)
     covisible = verification.verify_plane(left, right, plane, replace(config, covisible=True))
     maps = verification.agreement_maps(left, right, plane, config)
@@ -114,3 +113,8 @@ def test_the_score_divides_by_what_the_plane_maps_inside():
 def test_the_floor_is_validated(value: float) -> None:
     with pytest.raises(ValueError, match='covisible_floor'):
         verification.VerificationConfig(covisible_floor=value)
+
+
+def test_the_option_is_off_by_default() -> None:
+    assert not _gate_config(640).covisible
+    assert not verification.VerificationConfig().covisible
