@@ -41,6 +41,16 @@ Method (all at a working width of :attr:`VerificationConfig.working_width_px`):
    sideways probes accept more true planes but tell planes 2 px apart less well: measured on
    60 rendered scenes, the true plane beat the plane moved 2 px sideways by 1.2 times in
    35 % of them by the score, in all of them by the peak score.
+7. With :attr:`VerificationConfig.covisible` (off here by default; the pipeline sets it,
+   ``stream/trust.py`` ``COVISIBLE_SCORE``) the score, the peak score and
+   the band scores divide by the textured pixels that map inside the right image (the pixels
+   both cameras see), not by all textured ones: with a vertical offset or a roll between the
+   cameras the near ground leaves the right image, and each of its pixels counted against
+   the true plane. A plane that maps most of the image outside would then score on the
+   little it maps inside, so a plane must map at least
+   :attr:`VerificationConfig.covisible_floor` of the textured pixels inside (else it fails
+   as under ``min_overlap``) and the divisor is at least that share of all the textured
+   pixels (of the region, or of the band). Measured in docs/BENCHMARKS.md, round 20.
 
 The **confidence** maps the score linearly onto [0, 1] between
 :attr:`VerificationConfig.reject_score` (0.10, confidence 0) and
@@ -125,6 +135,16 @@ class VerificationConfig:
         weight_by_contrast: Count each textured pixel in the score, the peak score and the
             bottom score by ``1 / max(std, min_texture)`` of its window (see the module
             docstring, step 5) instead of 1.
+        covisible: Divide the score, the peak score and the band scores by the textured
+            pixels that map inside the right image (the pixels both cameras see) instead of
+            all textured pixels (see the module docstring, step 7).
+        covisible_floor: With ``covisible``: a plane that maps less than this share of the
+            textured pixels inside the right image fails with :data:`REASON_NO_OVERLAP` (as
+            under ``min_overlap``, whichever is larger), and each score divides by at least
+            this share of the textured pixels (of the region, or of a band, each weighted as
+            in the score): a plane that maps most of the image outside cannot score on the
+            little it maps inside, and co-visibility raises a score at most
+            ``1 / covisible_floor`` times.
     """
 
     working_width_px: int = 160
@@ -139,6 +159,8 @@ class VerificationConfig:
     reject_score: float = 0.10
     accept_score: float = 0.30
     weight_by_contrast: bool = True
+    covisible: bool = False
+    covisible_floor: float = 0.5
 
     def __post_init__(self) -> None:
         """Check every field.
@@ -153,7 +175,8 @@ class VerificationConfig:
         if (int(self.window_px) != self.window_px or self.window_px < 3
                 or self.window_px % 2 == 0):
             raise ValueError(f'window_px must be an odd integer >= 3, got {self.window_px!r}')
-        for name in ('ncc_threshold', 'peak_margin', 'min_textured_fraction', 'min_overlap'):
+        for name in ('ncc_threshold', 'peak_margin', 'min_textured_fraction', 'min_overlap',
+                     'covisible_floor'):
             value = getattr(self, name)
             if not (math.isfinite(value) and 0.0 <= value <= 1.0):
                 raise ValueError(f'{name} must be in [0, 1], got {value!r}')
@@ -575,30 +598,39 @@ def region_support(maps: AgreementMaps, close_px: int = REGION_CLOSE_PX
     return float(score), float(np.count_nonzero(own)) / own.size
 
 
-def _share(maps: AgreementMaps, pixels: np.ndarray, rows: slice = slice(None)) -> float:
-    """Return the weighted share of the textured pixels in ``rows`` that are in ``pixels``."""
+def _share(maps: AgreementMaps, pixels: np.ndarray, rows: slice = slice(None),
+           floor: float | None = None) -> float:
+    """Return the weighted share of the textured pixels in ``rows`` that are in ``pixels``.
+
+    With a ``floor`` (``VerificationConfig.covisible``) the share is of the textured pixels
+    in ``rows`` that map inside the right image, or of ``floor`` x all of them if more.
+    """
     weight = maps.weight[rows]
     total = float(weight.sum(dtype=np.float64))
+    if floor is not None:
+        total = max(float(weight[maps.inside[rows]].sum(dtype=np.float64)), floor * total)
     return float(weight[pixels[rows]].sum(dtype=np.float64)) / total if total > 0 else 0.0
 
 
-def _band_scores(maps: AgreementMaps, region: tuple[float, float, float, float]
-                 ) -> tuple[float, float, float, float]:
+def _band_scores(maps: AgreementMaps, region: tuple[float, float, float, float],
+                 floor: float | None = None) -> tuple[float, float, float, float]:
     """Return the supporting shares of the textured pixels in the region's three bands.
 
     Top, middle and bottom: the highest and lowest :data:`BOTTOM_BAND` of the region's rows
     and the rows between them; then the middle band's share of the region's textured pixels
-    (each weighted as in the score).
+    (each weighted as in the score). With a ``floor`` each share is :func:`_share`'s
+    co-visible one, and the middle band's share is of the textured pixels mapping inside.
     """
     height = maps.textured.shape[0]
     top = int(round((region[1] + BOTTOM_BAND * (region[3] - region[1])) * height))
     bottom = int(round((region[3] - BOTTOM_BAND * (region[3] - region[1])) * height))
     first = int(round(region[1] * height))
-    total = float(maps.weight.sum(dtype=np.float64))
-    middle = float(maps.weight[top:bottom].sum(dtype=np.float64))
-    return (_share(maps, maps.support, slice(first, top)),
-            _share(maps, maps.support, slice(top, bottom)),
-            _share(maps, maps.support, slice(bottom, None)),
+    weight = maps.weight if floor is None else np.where(maps.inside, maps.weight, 0.0)
+    total = float(weight.sum(dtype=np.float64))
+    middle = float(weight[top:bottom].sum(dtype=np.float64))
+    return (_share(maps, maps.support, slice(first, top), floor),
+            _share(maps, maps.support, slice(top, bottom), floor),
+            _share(maps, maps.support, slice(bottom, None), floor),
             middle / total if total > 0 else 0.0)
 
 
@@ -617,6 +649,7 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
     region_px = max(1, int(np.count_nonzero(maps.textured | ~maps.textured)))
     n_textured = int(np.count_nonzero(maps.textured))
     textured_fraction = n_textured / region_px
+    floor = float(config.covisible_floor) if config.covisible else None
     peak: float | Later
     if n_textured == 0:
         overlap = support = score = peak = below = 0.0
@@ -624,16 +657,16 @@ def _verdict(maps: AgreementMaps, config: VerificationConfig, start: float,
         overlap = int(np.count_nonzero(maps.textured & maps.inside)) / n_textured
         support = int(np.count_nonzero(maps.textured & maps.inside
                                        & (maps.ncc >= config.ncc_threshold))) / n_textured
-        score = _share(maps, maps.support)
-        peak = Later(lambda: _share(maps, peak_support()))
+        score = _share(maps, maps.support, floor=floor)
+        peak = Later(lambda: _share(maps, peak_support(), floor=floor))
         below = int(np.count_nonzero(_below(maps, config))) / n_textured
-    bands = _band_scores(maps, region)
+    bands = _band_scores(maps, region, floor)
     span = config.accept_score - config.reject_score
     confidence = float(np.clip((score - config.reject_score) / span, 0.0, 1.0))
     reason = ''
     if textured_fraction < config.min_textured_fraction:
         reason = REASON_NO_TEXTURE
-    elif overlap < config.min_overlap:
+    elif overlap < max(config.min_overlap, floor or 0.0):
         reason = REASON_NO_OVERLAP
     elif confidence < 0.5:
         reason = REASON_LOW_SUPPORT
