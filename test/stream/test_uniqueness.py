@@ -35,12 +35,15 @@ def _run(frame):
 def _wrong_without(frame, monkeypatch, *patches):
     """Run the frame with each ``(module, name, value)`` patched: a wrong plane is published.
 
-    Round 17's refusal of a weak finished winner with texture beyond it and round 18's roll of
-    a published ground plane (``verification.max_ground_roll_deg``) are off too: they also refuse
-    some of these planes, and the patched rule alone is what is tested.
+    Round 17's refusal of a weak finished winner with texture beyond it, round 18's roll of
+    a published ground plane (``verification.max_ground_roll_deg``) and session 19's slope
+    (``verification.prior_slope_margin``: it refuses the swapped look-alike of seed 0, whose
+    disparity does not grow down the image) are off too: they also refuse some of these planes,
+    and the patched rule alone is what is tested.
     """
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
     monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
+    monkeypatch.setattr(trust_module.TrustGate, 'slope_refusal', lambda *args: '')
     for module, name, value in patches:
         monkeypatch.setattr(module, name, value)
     without = _run(frame)
