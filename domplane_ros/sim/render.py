@@ -16,6 +16,7 @@ from typing import Sequence
 import cv2
 from domplane_ros.sim.model import (BACKGROUNDS, Box, camera_poses, CameraSetup, HeadPose,
                                     level_from_left, StereoFrame)
+from domplane_ros.sim.render_cache import cached
 from domplane_ros.sim.textures import (ALL_FLOOR_KINDS, BOX_TEXEL, FLOOR_TEXEL, sample,
                                        texture_pyramid, TEXTURE_VARIANTS, WALL_TEXEL)
 import numpy as np
@@ -435,6 +436,7 @@ def _expose(value: np.ndarray, setup: CameraSetup, s: int, blur_sigma: float,
     return np.clip(np.rint(grey), 0, 255).astype(np.uint8)
 
 
+@cached
 def render_stereo(setup: CameraSetup, boxes: Sequence[Box] = (), floor: str = 'random',
                   seed: int = 0, gain: float = 1.0, offset: float = 0.0,
                   noise_std: float = 1.0, head_pose: HeadPose | None = None,
