@@ -3,9 +3,9 @@
 The renderer is deterministic: a frame is a function of :func:`render_stereo`'s arguments,
 the simulator's source (with the prior's camera model) and the numpy and OpenCV versions.
 When the environment variable ``DOMPLANE_RENDER_CACHE`` names a folder, each rendered frame
-is stored there under a key made of exactly these (the arguments' pickled bytes, so two calls share a frame only when
-their arguments are equal value for value), and a later call with the same key loads it
-instead of rendering (~1 s a 640x480 pair). The test suite (``make test``) sets it, so a scene
+is stored there under a key made of exactly these (the arguments' pickled bytes, so two
+calls share a frame only when their arguments are equal value for value), and a later call
+with the same key loads it instead of rendering (~1 s a 640x480 pair). The test suite (``make test``) sets it, so a scene
 that several tests render is rendered once a run, also across the parallel workers;
 evaluations may set it too. Unset (the default), nothing is read or written.
 
