@@ -7,7 +7,8 @@ is stored there under a key made of exactly these (the arguments' pickled bytes,
 calls share a frame only when their arguments are equal value for value), and a later call
 with the same key loads it instead of rendering (~1 s a 640x480 pair). The test suite
 (``make test``) sets it, so a scene that several tests render is rendered once a run, also
-across the parallel workers; evaluations may set it too. Unset (the default), nothing is read or written.
+across the parallel workers; evaluations may set it too. Unset (the default), nothing is
+read or written.
 
 Every load returns fresh arrays (no frame is shared between callers). A file that cannot be
 read (truncated, another version) is rendered again and replaced; files are written to a
