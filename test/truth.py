@@ -52,4 +52,4 @@ def drifting_lock_frames():
     2.81 px off (docs/BENCHMARKS.md round 18).
     """
     from domplane_ros.sim.generators import scene_sequence
-    return scene_sequence(16, 33, floor='tiles_faint_64')[:6]
+    return scene_sequence(16, 33, floor='tiles_faint_64', only=range(6))

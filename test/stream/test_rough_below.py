@@ -30,7 +30,7 @@ WRONG_PX = 5.0
 
 def _rough_frame_41(index):
     error = random_rig_error(np.random.default_rng((41, 77)))
-    return rough_rig(scene_sequence(16, 41)[index], error)
+    return rough_rig(scene_sequence(16, 41, only=[index])[0], error)
 
 
 def _cold(frame):
