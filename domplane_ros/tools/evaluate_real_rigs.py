@@ -3,8 +3,9 @@
 Run ``python -m domplane_ros.tools.evaluate_real_rigs [--draws 24] [--first-seed 0]
 [--out DIR] [--others] [--no-baselines] [--families crop,fixed]``. The reference is KITTI
 2015 frame 000046's road homography ``H`` from its ground-truth disparity
-(:func:`~domplane_ros.tools.evaluation.references.kitti_reference`); each draw perturbs the pair by one transformation whose effect on ``H`` is
-exact (:mod:`domplane_ros.tools.evaluation.real_rigs`: the right camera's rig errors, a
+(:func:`~domplane_ros.tools.evaluation.references.kitti_reference`); each draw perturbs
+the pair by one transformation whose effect on ``H`` is exact
+(:mod:`domplane_ros.tools.evaluation.real_rigs`: the right camera's rig errors, a
 photometric change on one camera, crops of both images incl. the upper half, swapped cameras
 after a rig error) and scores every method by the mean transfer error over the road's pixels,
 as ``evaluate_kitti`` does. Four fixed pairs run once: the pair itself, pyrDown x1 and x2,
