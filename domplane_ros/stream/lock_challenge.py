@@ -129,7 +129,7 @@ class LockChallenge:
         if best is None or verdict is None or not trust.beats(verdict, lock):
             return None
         done = self._work().finished(step, problem, feats, size, best, verdict)
-        if trust.ground_refusal(done[0].homography, *size):
+        if trust.ground_refusal(done[0].homography, *size, done[1].verification):
             return None
         step.warm_start = 'challenger'
         step.lock_lost = challenger_won(verdict.peak_score, CHALLENGE_MARGIN, lock.peak_score)

@@ -370,7 +370,8 @@ class PlaneSearch:
         about to be published, never on the pick's unfinished candidates.
         """
         return (_finish_refusal(verdict)
-                or self._trust().ground_refusal(best.homography, *size))
+                or self._trust().ground_refusal(best.homography, *size,
+                                                verdict.verification))
 
     def _done(self, best: PlaneEstimate | None, verdict: Verdict | None
               ) -> tuple[PlaneEstimate, Verdict] | None:

@@ -151,6 +151,22 @@ LOCK_BOTTOM_RATIO = 0.4
 # proof. The default 10 (round 19, review rreview19; 8 in round 18): a left camera rolled 4 deg
 # against the baseline reads up to 8.4 deg on rendered pairs (9.1 with every rough-rig tolerance
 # at its extreme), the least refused wrong plane 12.1 deg.
+# A ground plane about to be published (where its roll and slope are checked, ground_refusal)
+# and verified with less than full confidence (its score under verification.accept_score) must
+# explain the lowest third of the region at least MIN_BOTTOM_OVER_TOP times as well as the
+# highest third (PlaneVerification.bottom_score, top_score), where the highest explains at least
+# MIN_TOP_FOR_BANDS: the ground seen from above is nearest, and best resolved, at the bottom of
+# the image; weak evidence for a plane that explains the top better is a plane through distant
+# structure above the ground (TrustGate.bands_refusal). Round 21 (docs/BENCHMARKS.md), default
+# prior: the three planes published > 5 px off on KITTI 000046 crops (tuning seeds 48-247) ran
+# through trees, poles and the far road above a strip of near road, bottom / top 0.58, 0.19,
+# 0.34 at confidence 0.93, 0.79, 0.99 (a 4.6 px one 0.65); the weak correct planes of that run
+# at least 18, of evaluate_trust's tuning seeds 0-29 (11 of 431 planes) at least 1.01 (conf
+# 0.99, a floor growing 0.057 px per row). At full confidence correct rendered floors read down
+# to 0.33: no rule there. MIN_TOP_FOR_BANDS: a top third explained under it says nothing (the
+# wrong planes above explain 0.29-0.42 of it). 0: off (as before round 21).
+MIN_BOTTOM_OVER_TOP = 0.75
+MIN_TOP_FOR_BANDS = 0.1
 # Whether the scores of ground planes divide by the textured pixels both cameras see
 # (VerificationConfig.covisible, core/verification.py step 7; its floor 0.5) rather than by all
 # textured pixels: with a vertical offset or a roll between the cameras the near ground leaves the
@@ -340,18 +356,38 @@ class TrustGate:
         if verdict.accepted and locked:
             # Last: a warm pair's plane is published if accepted (a search's is checked
             # once finished, PlaneSearch; its unfinished candidates never).
-            rolled = self.ground_refusal(homography, width, height)
+            rolled = self.ground_refusal(homography, width, height, check)
             if rolled:
                 return Verdict(False, check, rolled, ground=False)
         return verdict
 
-    def ground_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
+    def ground_refusal(self, homography: np.ndarray, width: int, height: int,
+                       check: PlaneVerification | None = None) -> str:
         """Return why a plane about to be published is not the prior's ground ('' if it is).
 
-        Its roll (:meth:`rolled_refusal`) and its disparity slope (:meth:`slope_refusal`).
+        Its roll (:meth:`rolled_refusal`), its disparity slope (:meth:`slope_refusal`) and,
+        given its verification ``check``, the bands it explains (:meth:`bands_refusal`).
         """
         return (self.rolled_refusal(homography, width, height)
-                or self.slope_refusal(homography, width, height))
+                or self.slope_refusal(homography, width, height)
+                or (self.bands_refusal(check) if check is not None else ''))
+
+    def bands_refusal(self, check: PlaneVerification) -> str:
+        """Return why a weak ground plane is refused for explaining its top best ('' if not).
+
+        Verified with less than full confidence, it must explain the lowest third of the region
+        at least :data:`MIN_BOTTOM_OVER_TOP` times as well as the highest, where the highest
+        explains at least :data:`MIN_TOP_FOR_BANDS`. Never with ``verification.plane: any``.
+        """
+        if (self.settings.plane == 'any' or MIN_BOTTOM_OVER_TOP <= 0.0
+                or check.confidence >= 1.0 or check.top_score < MIN_TOP_FOR_BANDS
+                or check.bottom_score >= MIN_BOTTOM_OVER_TOP * check.top_score):
+            return ''
+        return ('not the ground: the plane explains '
+                f'{100 * check.top_score:.0f} % of the top of the region but '
+                f'{100 * check.bottom_score:.0f} % of its bottom (< {MIN_BOTTOM_OVER_TOP:g} x) at '
+                f'confidence {check.confidence:.2f} < 1; a plane through distant structure above '
+                'the ground?')
 
     def slope_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
         """Return why a ground plane is refused for its disparity slope ('' if not).

@@ -1,10 +1,11 @@
 """Real texture, rough rigs: KITTI 000046 perturbed by transformations of known effect.
 
 Run ``python -m domplane_ros.tools.evaluate_real_rigs [--draws 24] [--first-seed 0]
-[--out DIR] [--others]``. The reference is KITTI 2015 frame 000046's road homography ``H``
-from its ground-truth disparity (:func:`~domplane_ros.tools.evaluation.references.
-kitti_reference`); each draw perturbs the pair by one transformation whose effect on ``H`` is
-exact (:mod:`domplane_ros.tools.evaluation.real_rigs`: the right camera's rig errors, a
+[--out DIR] [--others] [--no-baselines] [--families crop,fixed]``. The reference is KITTI
+2015 frame 000046's road homography ``H`` from its ground-truth disparity
+(:func:`~domplane_ros.tools.evaluation.references.kitti_reference`); each draw perturbs
+the pair by one transformation whose effect on ``H`` is exact
+(:mod:`domplane_ros.tools.evaluation.real_rigs`: the right camera's rig errors, a
 photometric change on one camera, crops of both images incl. the upper half, swapped cameras
 after a rig error) and scores every method by the mean transfer error over the road's pixels,
 as ``evaluate_kitti`` does. Four fixed pairs run once: the pair itself, pyrDown x1 and x2,
@@ -54,6 +55,8 @@ WRONG_PX = 5.0
 CONFIGS = ('default', 'kitti_prior')
 METHODS = ('ours default', 'ours kitti_prior', 'orb_magsac', 'sift_magsac')
 SHEET_TILES = 12
+# The name of the fixed pairs (the pair itself, pyrDown x1 and x2, swapped) for --families.
+FIXED = 'fixed'
 OTHER_PAIRS = (('aloe', 'aloeL.jpg', 'aloeR.jpg'), ('books', 'left.jpg', 'right.jpg'),
                ('graffiti', 'graf1.png', 'graf3.png'))
 
@@ -134,18 +137,24 @@ def fixed_pairs(base: Perturbed) -> list[Perturbed]:
     return [base, downscale(base, 1), downscale(base, 2), swap(base)]
 
 
-def evaluate(draws: Sequence[int], base: Perturbed, baselines: bool = True
+def evaluate(draws: Sequence[int], base: Perturbed, baselines: bool = True,
+             families: Sequence[str] = (*DRAW_FAMILIES, FIXED)
              ) -> tuple[list[Row], list[tuple[Row, Perturbed, np.ndarray | None]]]:
-    """Run the fixed pairs and every family's draws; return the rows and the sheet's tiles."""
+    """Run the fixed pairs and every family's draws; return the rows and the sheet's tiles.
+
+    ``families``: the draw families run (of :data:`DRAW_FAMILIES`) and, if it holds
+    :data:`FIXED`, the fixed pairs.
+    """
     settings = configs()
-    jobs = [(pair, -1) for pair in fixed_pairs(base)]
+    drawn = [f for f in DRAW_FAMILIES if f in families]
+    fixed = fixed_pairs(base) if FIXED in families else []
+    jobs = [(pair, -1) for pair in fixed]
     jobs += [(None, seed) for seed in draws]
     rows: list[Row] = []
     kept: list[tuple[Row, Perturbed, np.ndarray | None]] = []
-    bar = progress(None, 'real rigs', total=len(fixed_pairs(base)) + len(draws)
-                   * len(DRAW_FAMILIES))
+    bar = progress(None, 'real rigs', total=len(fixed) + len(draws) * len(drawn))
     for pair, seed in jobs:
-        pairs = [pair] if pair is not None else [draw(base, f, seed) for f in DRAW_FAMILIES]
+        pairs = [pair] if pair is not None else [draw(base, f, seed) for f in drawn]
         for one in pairs:
             new, found = run_pair(one, seed, settings, baselines)
             rows += new
@@ -371,20 +380,28 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help='skip ORB + MAGSAC++ and SIFT + MAGSAC++')
     parser.add_argument('--others', action='store_true',
                         help='also run Aloe, books and graffiti with the photometric changes')
+    parser.add_argument('--families', default=','.join((*DRAW_FAMILIES, FIXED)),
+                        help='comma list of the draw families to run and "fixed" for the '
+                        'fixed pairs (default: all)')
     args = parser.parse_args(argv)
+    families = [f.strip() for f in args.families.split(',') if f.strip()]
+    unknown = sorted(set(families) - {*DRAW_FAMILIES, FIXED})
+    if unknown:
+        parser.error(f'unknown families {unknown}; choose from {(*DRAW_FAMILIES, FIXED)}')
     seeds = list(range(args.first_seed, args.first_seed + args.draws))
     if any(16000 <= s <= 16999 for s in seeds):
         parser.error('seeds 16000-16999 are held out')
     args.out.mkdir(parents=True, exist_ok=True)
     with one_core():
-        rows, kept = evaluate(seeds, kitti_base(), not args.no_baselines)
+        rows, kept = evaluate(seeds, kitti_base(), not args.no_baselines, families)
         others = (run_others(seeds[:len(PHOTOMETRIC_KINDS)], default_data_dir() / OPENCV_DIR,
                              args.out) if args.others else [])
     write_csv(args.out / 'draws.csv', rows)
     shown = write_sheet(args.out / 'sheet.png', kept)
     photo = [r for r in rows if r.family == 'photometric']
     lines = [f'machine: {machine_name()}',
-             f'KITTI 2015 000046, draws: seeds {seeds[0]}..{seeds[-1]} per family; configs: '
+             f'KITTI 2015 000046, draws: seeds {seeds[0]}..{seeds[-1]} per family '
+             f'({", ".join(families)}); configs: '
              'documented default prior and KITTI_PRIOR, whole image; correct < 1 px, wrong > '
              '5 px (or any plane where the window has no road)', '',
              *table(rows), '', 'photometric, by kind:', '', *table(photo, key='kind'), '',

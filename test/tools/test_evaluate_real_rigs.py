@@ -123,3 +123,11 @@ def test_a_plane_published_where_there_is_no_road_counts_as_wrong():
     counts = tool.tally([published, refused])
     assert (counts['published'], counts['wrong'], counts['road']) == (1, 1, 0)
     assert counts['precision'] == 0.0 and math.isnan(counts['recall'])
+
+
+def test_families_choose_the_draws_and_the_fixed_pairs(tmp_path):
+    base = tool.kitti_base(default_data_dir())
+    rows, _ = tool.evaluate([0], base, baselines=False, families=['crop_upper'])
+    assert {r.family for r in rows} == {'crop_upper'} and len(rows) == len(tool.configs())
+    with pytest.raises(SystemExit):
+        tool.main(['--families', 'crop,nonsense', '--out', str(tmp_path)])
