@@ -183,6 +183,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'below 0.021 px per row). Narrow the prior to make it bite; no upper bound; 100 is '
               'off.',
               0.0, 100.0),
+    ParamSpec('verification.covisible', True, 'bool',
+              'Ground mode: divide the scores by the textured pixels that the plane maps '
+              'inside the right image (both cameras see them) instead of all textured pixels: '
+              'a vertical offset, a roll or a focal mismatch between the cameras moves the '
+              'near ground out of the right image, and counted it scores against the true '
+              'plane. A plane mapping less than half its textured pixels inside is refused, '
+              'so a score rises at most twice. false: every textured pixel counts, as before '
+              'session 20 (planes any always count them all).'),
     # Mask.
     ParamSpec('mask.scale', 0.5, 'float',
               'Resolution of the dense mask computation relative to the image.', 0.1, 1.0),

@@ -41,8 +41,8 @@ Method (all at a working width of :attr:`VerificationConfig.working_width_px`):
    sideways probes accept more true planes but tell planes 2 px apart less well: measured on
    60 rendered scenes, the true plane beat the plane moved 2 px sideways by 1.2 times in
    35 % of them by the score, in all of them by the peak score.
-7. With :attr:`VerificationConfig.covisible` (off here by default; the pipeline sets it,
-   ``stream/trust.py`` ``COVISIBLE_SCORE``) the score, the peak score and
+7. With :attr:`VerificationConfig.covisible` (off here by default; the pipeline sets it for
+   ground planes from ``verification.covisible``, on by default) the score, the peak score and
    the band scores divide by the textured pixels that map inside the right image (the pixels
    both cameras see), not by all textured ones: with a vertical offset or a roll between the
    cameras the near ground leaves the right image, and each of its pixels counted against
@@ -50,7 +50,7 @@ Method (all at a working width of :attr:`VerificationConfig.working_width_px`):
    little it maps inside, so a plane must map at least
    :attr:`VerificationConfig.covisible_floor` of the textured pixels inside (else it fails
    as under ``min_overlap``) and the divisor is at least that share of all the textured
-   pixels (of the region, or of the band). Measured in docs/BENCHMARKS.md, round 20.
+   pixels (of the region, or of the band). Measured in docs/BENCHMARKS.md, rounds 20 and 21.
 
 The **confidence** maps the score linearly onto [0, 1] between
 :attr:`VerificationConfig.reject_score` (0.10, confidence 0) and

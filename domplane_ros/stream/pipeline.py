@@ -122,18 +122,20 @@ class PlanePipeline:
     def update_config(self, config: PlaneNodeConfig) -> None:
         """Use a new configuration from the next frame on, keeping the warm start.
 
-        A changed prior, initial homography, ``verification.plane`` or ``verification.scale``
-        drops the warm start. Other changed ``verification.*`` settings keep the lock with its
-        score history and reference (:data:`~domplane_ros.stream.trust.LOCK_REFERENCE`): its
-        scores are measured at the same working width, and a lock whose reference were
-        dropped would take its next plane, slid or not, as the plane it started from.
+        A changed prior, initial homography, ``verification.plane``, ``verification.scale``
+        or ``verification.covisible`` drops the warm start (the last two change what a score
+        measures). Other changed ``verification.*`` settings keep the lock with its score
+        history and reference (:data:`~domplane_ros.stream.trust.LOCK_REFERENCE`): its scores
+        are measured at the same working width over the same pixels, and a lock whose
+        reference were dropped would take its next plane, slid or not, as the plane it
+        started from.
         """
+        old, new = self.config.verification, config.verification
         if (config.prior != self.config.prior
                 or config.initial_homography != self.config.initial_homography
-                or config.verification.plane != self.config.verification.plane
-                or config.verification.scale != self.config.verification.scale):
-            self.reset('a changed prior, initial homography, verification.plane or '
-                       'verification.scale dropped the warm start')
+                or (new.plane, new.scale, new.covisible) != (old.plane, old.scale, old.covisible)):
+            self.reset('a changed prior, initial homography, verification.plane, '
+                       'verification.scale or verification.covisible dropped the warm start')
             self._checks.clear()
             self._searcher.prior_changed()
         if config.verification != self.config.verification:

@@ -167,15 +167,6 @@ LOCK_BOTTOM_RATIO = 0.4
 # wrong planes above explain 0.29-0.42 of it). 0: off (as before round 21).
 MIN_BOTTOM_OVER_TOP = 0.75
 MIN_TOP_FOR_BANDS = 0.1
-# Whether the scores of ground planes divide by the textured pixels both cameras see
-# (VerificationConfig.covisible, core/verification.py step 7; its floor 0.5) rather than by all
-# textured pixels: with a vertical offset or a roll between the cameras the near ground leaves the
-# right image and counts against the true plane. Round 20 (docs/BENCHMARKS.md), tuning seeds, one
-# run: real texture (KITTI 000046 perturbed, seeds 0-23, default prior) 55 published / 49 correct
-# / 0 wrong -> 100 / 91 / 0; every evaluate_trust case the same counts, 0 wrong. Off until the 13
-# tests of test/core and test/stream that it changes are reviewed (listed there). Planes ``any``
-# (boards) keep the count their own-region rule was measured with in any case.
-COVISIBLE_SCORE = False
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -284,14 +275,20 @@ class TrustGate:
             working = int(min(MAX_WORKING_WIDTH, max(MIN_WORKING_WIDTH,
                                                      round(self.settings.scale * width))))
             # Ground planes' scores weight each textured pixel by its contrast (core/
-            # verification.py, step 5); planes ``any`` (boards) keep the count they were
+            # verification.py, step 5) and, with verification.covisible (default on since
+            # session 20), divide by the textured pixels the plane maps inside the right image
+            # (step 7, its floor 0.5): with a vertical offset, a roll or a focal mismatch the
+            # near ground leaves the right image and counted against the true plane
+            # (docs/BENCHMARKS.md rounds 20 and 21: real texture, KITTI 000046 perturbed,
+            # tuning seeds 0-23, default prior, 55 published / 49 correct / 0 wrong -> 100 /
+            # 91 / 0). Planes ``any`` (boards) keep the count their own-region rule was
             # measured with.
             self._configs[width] = VerificationConfig(
                 working_width_px=min(working, width),
                 reject_score=self.settings.min_score - 0.1,
                 accept_score=self.settings.min_score + 0.1,
                 weight_by_contrast=self.settings.plane != 'any',
-                covisible=COVISIBLE_SCORE and self.settings.plane != 'any')
+                covisible=self.settings.covisible and self.settings.plane != 'any')
         return self._configs[width]
 
     def reset(self) -> None:

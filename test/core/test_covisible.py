@@ -115,6 +115,14 @@ def test_the_floor_is_validated(value: float) -> None:
         verification.VerificationConfig(covisible_floor=value)
 
 
-def test_the_option_is_off_by_default() -> None:
-    assert not _gate_config(640).covisible
+def test_ground_planes_are_covisible_by_default_and_any_planes_counted() -> None:
+    """The pipeline's ground planes use it (``verification.covisible``, session 20); boards not.
+
+    The core's own default stays off (a bare :class:`VerificationConfig` counts every
+    textured pixel); ``verification.plane: any`` keeps the count its own-region rule was
+    measured with, and ``verification.covisible: false`` switches it off.
+    """
+    assert _gate_config(640).covisible
     assert not verification.VerificationConfig().covisible
+    assert not TrustGate(VerificationSettings(plane='any')).config(640).covisible
+    assert not TrustGate(VerificationSettings(covisible=False)).config(640).covisible

@@ -306,8 +306,12 @@ def test_the_peak_score_is_measured_when_first_read(monkeypatch: pytest.MonkeyPa
         check = verification.verify_plane(frame.left, frame.right, plane, config)
         assert len(calls) == 1 + len(verification.PROBES)
         maps = verification.agreement_maps(frame.left, frame.right, plane, config)
-        eager = float(maps.weight[maps.peak_support].sum(dtype=np.float64)
-                      / maps.weight.sum(dtype=np.float64))
+        # Co-visible (the pipeline's default for ground planes): the share is of the textured
+        # weight mapping inside the right image, or of covisible_floor x all of it if more.
+        assert config.covisible
+        divisor = max(float(maps.weight[maps.inside].sum(dtype=np.float64)),
+                      config.covisible_floor * float(maps.weight.sum(dtype=np.float64)))
+        eager = float(maps.weight[maps.peak_support].sum(dtype=np.float64)) / divisor
         assert 0.0 < eager < check.score
         calls.clear()
         assert check.peak_score == eager

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
-from domplane_ros.stream import trust
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.evaluate_real_rigs import kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
@@ -25,15 +26,17 @@ def rough_pair():
 
 @pytest.mark.parametrize('covisible', [False, True])
 def test_a_rough_rig_on_real_texture_is_published_with_the_covisible_score(
-        rough_pair, covisible: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+        rough_pair, covisible: bool) -> None:
     """Refused when every textured pixel counts; published 0.51 px off when only co-visible.
 
     Counted over every textured pixel the truth explains too little of the image (the near
     road, which the right camera does not see, counts against it); counted over the pixels
-    both cameras see, the search publishes the road 0.51 px off.
+    both cameras see (``verification.covisible``, the default), the search publishes the
+    road 0.51 px off.
     """
-    monkeypatch.setattr(trust, 'COVISIBLE_SCORE', covisible)
-    result = PlanePipeline(one_shot_search(PlaneNodeConfig())).process(
+    config = PlaneNodeConfig()
+    config = replace(config, verification=replace(config.verification, covisible=covisible))
+    result = PlanePipeline(one_shot_search(config)).process(
         rough_pair.left, rough_pair.right, 0)
     if not covisible:
         assert not result.ok

@@ -33,10 +33,19 @@ def test_band_scores_split_the_score_by_rows(roi):
     y0, y1 = (0.0, 1.0) if roi is None else (roi[1], roi[3])
     top = round((y0 + BOTTOM_BAND * (y1 - y0)) * height)
     bottom = round((y1 - BOTTOM_BAND * (y1 - y0)) * height)
-    weights = [float(maps.weight[rows].sum()) for rows in
-               (slice(0, top), slice(top, bottom), slice(bottom, None))]
+    # Co-visible (verification.covisible, the default for ground planes): each band's score
+    # and the score divide by the textured weight that maps inside the right image, unless
+    # that is under covisible_floor of the band's (or the region's) whole textured weight.
+    # The truth maps nearly all of it inside, so no divisor is held at the floor and the
+    # three bands' inside weights add up to the score's divisor.
+    assert config.covisible
+    bands_rows = (slice(0, top), slice(top, bottom), slice(bottom, None))
+    weights = [float(maps.weight[rows][maps.inside[rows]].sum()) for rows in bands_rows]
+    textured = [float(maps.weight[rows].sum()) for rows in bands_rows]
+    assert all(inside >= config.covisible_floor * whole
+               for inside, whole in zip(weights, textured)), (weights, textured)
     bands = (check.top_score, check.middle_score, check.bottom_score)
-    # The score is the bands' scores weighted by the texture each holds.
+    # The score is the bands' scores weighted by the texture each holds inside.
     assert np.dot(weights, bands) / sum(weights) == pytest.approx(check.score, abs=1e-6)
     assert check.middle_texture == pytest.approx(weights[1] / sum(weights), abs=1e-6)
     assert all(weight > 0 for weight in weights)

@@ -28,11 +28,22 @@ import numpy as np
 import pytest
 
 
-def _run(frame):
-    return PlanePipeline().process(frame.left, frame.right, 0)
+def _run(frame, config=None):
+    return PlanePipeline(config).process(frame.left, frame.right, 0)
 
 
-def _wrong_without(frame, monkeypatch, *patches):
+def _counted_all() -> PlaneNodeConfig:
+    """Return the default configuration with every textured pixel counted in the score.
+
+    ``verification.covisible`` off, as before session 20: the scenes of the tests that use it
+    were chosen so; co-visible (the default) each is solved or refused by a simpler rule,
+    said in each test, and the rule shown would go untested.
+    """
+    config = PlaneNodeConfig()
+    return replace(config, verification=replace(config.verification, covisible=False))
+
+
+def _wrong_without(frame, monkeypatch, *patches, config=None):
     """Run the frame with each ``(module, name, value)`` patched: a wrong plane is published.
 
     Round 17's refusal of a weak finished winner with texture beyond it, round 18's roll of
@@ -46,7 +57,7 @@ def _wrong_without(frame, monkeypatch, *patches):
     monkeypatch.setattr(trust_module.TrustGate, 'slope_refusal', lambda *args: '')
     for module, name, value in patches:
         monkeypatch.setattr(module, name, value)
-    without = _run(frame)
+    without = _run(frame, config)
     assert without.ok and plane_error_px(frame, without.homography) > 5.0
 
 
@@ -74,9 +85,16 @@ def test_a_look_alike_that_sees_more_of_the_image_is_not_published(monkeypatch):
     original = trust_module.TrustGate.config
     monkeypatch.setattr(trust_module.TrustGate, 'config', lambda self, width: replace(
         original(self, width), weight_by_contrast=False))
+    # Co-visible (the default since session 20) the scores themselves are of the pixels each
+    # plane maps inside: the look-alike scores 0.47 against the truth's 0.49, and the pair is
+    # refused as ambiguous before the shared pixels are compared (with or without this rule).
     result = _run(frame)
+    assert not result.ok and 'explains the image almost as well' in result.reason, result.reason
+    # Every textured pixel counted (as the scene was chosen) only this rule refuses it.
+    result = _run(frame, _counted_all())
     assert not result.ok and 'both planes see' in result.reason, result.reason
-    _wrong_without(frame, monkeypatch, (uniqueness_module, 'SHARED_RIVAL_SHARE', math.inf))
+    _wrong_without(frame, monkeypatch, (uniqueness_module, 'SHARED_RIVAL_SHARE', math.inf),
+                   config=_counted_all())
 
 
 @pytest.mark.parametrize('seed, rough', [(409, False), (453, True)])
@@ -90,19 +108,22 @@ def test_a_swapped_look_alike_with_texture_beyond_it_leaves_the_floor_unique(
     if rough:
         frame = rough_rig(frame, random_rig_error(np.random.default_rng((seed, 77))))
     # Weighted by contrast (the default) the floor wins outright; the scenes were chosen with
-    # pixels counted, where the swapped look-alike ties with the floor.
+    # pixels counted, where the swapped look-alike ties with the floor. Co-visible (the
+    # default since session 20) it no longer ties: without the refutation the floor is
+    # published (0.23 and 0.06 px, session 19), so the pixels are counted over all the
+    # texture, as when the scenes were chosen.
     default = _run(frame)
     assert default.ok and plane_error_px(frame, default.homography) < 1.0
     original = trust_module.TrustGate.config
     monkeypatch.setattr(trust_module.TrustGate, 'config', lambda self, width: replace(
         original(self, width), weight_by_contrast=False))
-    result = _run(frame)
+    result = _run(frame, _counted_all())
     assert result.ok and plane_error_px(frame, result.homography) < 1.0
     # The same pair with the cameras swapped: the swapped floor is the truth, nothing lies
     # beyond it, and it is not refuted.
-    assert not _run(swapped(frame)).ok
+    assert not _run(swapped(frame), _counted_all()).ok
     monkeypatch.setattr(uniqueness_module, 'MIN_SWAP_BEYOND', math.inf)
-    without = _run(frame)
+    without = _run(frame, _counted_all())
     assert not without.ok and 'swapped' in without.reason, without.reason
 
 
@@ -220,10 +241,10 @@ def test_the_swap_rivals_are_found_only_once_a_plane_is_verified(monkeypatch):
     assert len(calls) == 1
 
 
-def _faint_both(seed):
+def _faint_both(seed, config=None):
     """Return tuning seed ``seed``'s faint tiled floor and the pipeline evaluate_trust uses."""
     from domplane_ros.sim.textures import FAINT_TILE_KINDS
-    config = one_shot_search(PlaneNodeConfig())
+    config = one_shot_search(PlaneNodeConfig() if config is None else config)
     config = replace(config, features=replace(config.features, kind='both'))
     frame = random_scene(seed, floor=FAINT_TILE_KINDS[seed % len(FAINT_TILE_KINDS)])
     return frame, PlanePipeline(config)
@@ -345,14 +366,20 @@ def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(
     # when it was found: weighted, the floor is published 0.46 px off): the winner, 6.1 px off the
     # floor, has 8.5 % of the texture beyond it, its swapped rival 54 %. Refuting the rival
     # on the ratio alone published the winner (evaluate_trust, twelfth session); the winner
-    # must itself have (almost) nothing beyond it.
+    # must itself have (almost) nothing beyond it. Co-visible (the default since session 20)
+    # the swapped rival no longer ties with the winner: the pair is refused by the level-head
+    # rule (-15 deg), and without that rule the winner is published 3.6 px off whatever this
+    # rule says; so the rule is shown with every textured pixel counted, as it was found.
     frame, pipeline = _faint_both(11)
+    result = pipeline.process(frame.left, frame.right, 0)
+    assert not result.ok and 'not the ground of a level head' in result.reason, result.reason
+    frame, pipeline = _faint_both(11, _counted_all())
     result = pipeline.process(frame.left, frame.right, 0)
     assert not result.ok and 'swapped' in result.reason, result.reason
     monkeypatch.setattr(uniqueness_module, 'MAX_WINNER_BEYOND', math.inf)
     # Round 18's roll of a published ground plane refuses it too.
     monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
-    frame, pipeline = _faint_both(11)
+    frame, pipeline = _faint_both(11, _counted_all())
     without = pipeline.process(frame.left, frame.right, 0)
     # 3.5 px off since the refinement samples the faint floor (round 12; 6.1 px before it):
     # still not the floor.
