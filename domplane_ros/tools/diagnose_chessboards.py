@@ -88,8 +88,8 @@ def diagnose(folder: Path) -> tuple[list[str], list[np.ndarray]]:
         result = PlanePipeline(config).process(left, right, 0)
         product = (f'{mean_transfer_px(result.homography, src, dst):.2f} px' if result.ok
                    else f'refused ({result.reason[:70]})')
-        lines.append(f'{number}: truth slope {slope:+.3f} score {verdict.score:.2f} '
-                     f'{_why(verdict)}; one square off {look:.2f}; prior nearest '
+        lines.append(f'{number}: truth slope {slope:+.3f} score {verdict.score:.3f} '
+                     f'{_why(verdict)}; one square off {look:.3f}; prior nearest '
                      f'{nearest:.1f} px; product {product}')
         tiles.append(_tile(left, src, [f'pair {number}: truth {_why(verdict)}',
                                        f'slope {slope:+.3f} score {verdict.score:.2f}',

@@ -49,12 +49,15 @@ def _wrong_without(frame, monkeypatch, *patches, config=None):
     Round 17's refusal of a weak finished winner with texture beyond it, round 18's roll of
     a published ground plane (``verification.max_ground_roll_deg``) and session 19's slope
     (``verification.prior_slope_margin``: it refuses the swapped look-alike of seed 0, whose
-    disparity does not grow down the image) are off too: they also refuse some of these planes,
-    and the patched rule alone is what is tested.
+    disparity does not grow down the image) and session 20's bands (``MIN_BOTTOM_OVER_TOP``:
+    it refuses the plane through the boxes of swapped seed 61, bottom under 0.75 x its top at
+    confidence 0.82) are off too: they also refuse some of these planes, and the patched rule
+    alone is what is tested.
     """
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
     monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
     monkeypatch.setattr(trust_module.TrustGate, 'slope_refusal', lambda *args: '')
+    monkeypatch.setattr(trust_module, 'MIN_BOTTOM_OVER_TOP', 0.0)
     for module, name, value in patches:
         monkeypatch.setattr(module, name, value)
     without = _run(frame, config)
