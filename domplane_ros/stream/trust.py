@@ -164,7 +164,9 @@ LOCK_BOTTOM_RATIO = 0.4
 # at least 18, of evaluate_trust's tuning seeds 0-29 (11 of 431 planes) at least 1.01 (conf
 # 0.99, a floor growing 0.057 px per row). At full confidence correct rendered floors read down
 # to 0.33: no rule there. MIN_TOP_FOR_BANDS: a top third explained under it says nothing (the
-# wrong planes above explain 0.29-0.42 of it). 0: off (as before round 21).
+# wrong planes above explain 0.29-0.42 of it). 0: off (as before round 21). With the co-visible
+# score (the default since session 20) crop 191's wrong plane scores 0.353 >= accept_score:
+# full confidence, not looked at, published 7.3 px off (review of session 20; docs/METHOD.md).
 MIN_BOTTOM_OVER_TOP = 0.75
 MIN_TOP_FOR_BANDS = 0.1
 # Working width limits of the verification, pixels.
