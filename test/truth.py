@@ -53,3 +53,15 @@ def drifting_lock_frames():
     """
     from domplane_ros.sim.generators import scene_sequence
     return scene_sequence(16, 33, floor='tiles_faint_64', only=range(6))
+
+
+def real_rig_result(pair, config):
+    """Return a fresh pipeline's result on an evaluate_real_rigs pair and its error (None: none).
+
+    The error is the mean transfer error of the published homography over the pair's road
+    points (``RealPair.errors_px``).
+    """
+    from domplane_ros.stream.pipeline import PlanePipeline
+    result = PlanePipeline(config).process(pair.left, pair.right, 0)
+    error = float(np.mean(pair.errors_px(result.homography))) if result.ok else None
+    return result, error

@@ -10,13 +10,11 @@ and 21 % of the bottom third. The rule refuses it; a window of the road keeps it
 
 from __future__ import annotations
 
-from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.stream import trust
-from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.evaluate_real_rigs import configs, kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
-import numpy as np
 import pytest
+from truth import real_rig_result
 
 
 @pytest.fixture(scope='module')
@@ -24,10 +22,7 @@ def base():
     return kitti_base()
 
 
-def _run(pair, config: PlaneNodeConfig):
-    result = PlanePipeline(config).process(pair.left, pair.right, 0)
-    error = float(np.mean(pair.errors_px(result.homography))) if result.ok else None
-    return result, error
+_run = real_rig_result
 
 
 def test_a_plane_explaining_the_top_over_the_bottom_is_refused(base, monkeypatch):

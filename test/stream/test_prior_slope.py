@@ -25,6 +25,7 @@ from domplane_ros.tools.evaluate_real_rigs import configs, kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
 import numpy as np
 import pytest
+from truth import real_rig_result
 
 
 @pytest.fixture(scope='module')
@@ -32,10 +33,7 @@ def base():
     return kitti_base()
 
 
-def _run(pair, config: PlaneNodeConfig):
-    result = PlanePipeline(config).process(pair.left, pair.right, 0)
-    error = float(np.mean(pair.errors_px(result.homography))) if result.ok else None
-    return result, error
+_run = real_rig_result
 
 
 def _margin(config: PlaneNodeConfig, margin: float) -> PlaneNodeConfig:
