@@ -2,13 +2,14 @@
 
 Callbacks must stay cheap and stale pairs must not queue up: :class:`NewestSlot` holds at most
 one item. :meth:`NewestSlot.put` replaces an item the worker has not taken yet (and counts it
-as dropped); :meth:`NewestSlot.take` blocks until there is an item and returns the newest.
+as dropped; a ``merge`` function can carry what the dropped item knew into the new one);
+:meth:`NewestSlot.take` blocks until there is an item and returns the newest.
 """
 
 from __future__ import annotations
 
 import threading
-from typing import Generic, TypeVar
+from typing import Callable, Generic, TypeVar
 
 T = TypeVar('T')
 
@@ -22,8 +23,15 @@ class NewestSlot(Generic[T]):
 
     """
 
-    def __init__(self) -> None:
-        """Start empty and open."""
+    def __init__(self, merge: Callable[[T, T], T] | None = None) -> None:
+        """Start empty and open.
+
+        Args:
+            merge: ``merge(replaced, new)`` returns the item to keep when ``new`` replaces an
+                item not taken yet (None: keep ``new`` as it is).
+
+        """
+        self._merge = merge
         self._cv = threading.Condition()
         self._item: T | None = None
         self._closed = False
@@ -41,6 +49,8 @@ class NewestSlot(Generic[T]):
             replaced = self._item is not None
             if replaced:
                 self.dropped += 1
+                if self._merge is not None:
+                    item = self._merge(self._item, item)
             self._item = item
             self.put_count += 1
             self._cv.notify()

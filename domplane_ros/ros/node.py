@@ -34,7 +34,7 @@ from domplane_ros.stream.health import problem_key, Throttle
 from domplane_ros.stream.pipeline import debug_overlay, PlanePipeline
 from domplane_ros.stream.session import ProcessedPair, SIDES, StreamSession
 from domplane_ros.stream.status import STATUS_NAME
-from domplane_ros.stream.sync import Pair
+from domplane_ros.stream.sync import merge_dropped, Pair
 from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -70,7 +70,9 @@ class PlaneNode(Node):
         session: The stream's :class:`~domplane_ros.stream.session.StreamSession` (pipeline,
             synchroniser, counters, status).
         slot: The newest-wins hand-over to the worker; ``slot.dropped`` counts the pairs
-            replaced before the worker took them.
+            replaced before the worker took them (their stream gaps and resets are kept in the
+            pair that replaced them: a search longer than ``pipeline.max_stamp_jump_s`` does
+            not drop the warm start).
 
     Raises:
         ConfigError: At construction, when a parameter (from a params file or overrides) is
@@ -83,7 +85,7 @@ class PlaneNode(Node):
         super().__init__('plane_node', **kwargs)
         self._values = self._declare_parameters()
         config = PlaneNodeConfig.from_flat(self._values)
-        self.slot: NewestSlot[Pair] = NewestSlot()
+        self.slot: NewestSlot[Pair] = NewestSlot(merge=merge_dropped)
         self._stopping = False
         self._throttle = Throttle(_THROTTLE_S)
         self._qos_warned: set[str] = set()

@@ -135,7 +135,7 @@ class PairChecks:
         self._last_images: tuple[np.ndarray, np.ndarray] | None = None
 
     def check(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
-              limits: PipelineConfig) -> PairCheck:
+              limits: PipelineConfig, stream_gap_ns: int | None = None) -> PairCheck:
         """Check one pair and remember it for the next.
 
         Args:
@@ -146,13 +146,18 @@ class PairChecks:
                 frame with more of its pixels black (<= 2) or saturated (>= 253) is refused;
                 1.0 never refuses) and ``max_stamp_jump_s`` (a stamp more than this after the
                 last pair's drops the warm start).
+            stream_gap_ns: The longest gap between consecutive pairs the cameras delivered
+                since the last pair checked (:attr:`~domplane_ros.stream.sync.Pair.gap_ns`),
+                when the caller drops pairs (a newest-wins hand-over behind a slow search): it
+                is the forward jump, so a gap the processing made is not taken for the
+                cameras'. None: the jump is measured from the last pair checked.
 
         Returns:
             The :class:`PairCheck`.
 
         """
         warnings: list[str] = []
-        reset = self._check_stamp(stamp_ns, limits.max_stamp_jump_s, warnings)
+        reset = self._check_stamp(stamp_ns, limits.max_stamp_jump_s, warnings, stream_gap_ns)
         shapes = (left.shape, right.shape)
         if self._last_shapes is not None and shapes != self._last_shapes:
             self.counts.add('size_changes')
@@ -181,7 +186,8 @@ class PairChecks:
             refused = self._frozen_reason(previous, left, right)
         return PairCheck(refused, reset, tuple(warnings))
 
-    def _check_stamp(self, stamp_ns: int, max_jump_s: float, warnings: list[str]) -> bool:
+    def _check_stamp(self, stamp_ns: int, max_jump_s: float, warnings: list[str],
+                     stream_gap_ns: int | None) -> bool:
         """Return whether the stamp (backwards, or a jump forward) drops the warm start."""
         last, self._last_stamp_ns = self._last_stamp_ns, stamp_ns
         if last is not None and stamp_ns < last:
@@ -189,9 +195,14 @@ class PairChecks:
             warnings.append(f'stamp went backwards by {(last - stamp_ns) * 1e-9:.3f} s: '
                             'warm start dropped')
             return True
-        if last is not None and stamp_ns - last > max_jump_s * 1e9:
+        jump_ns = stamp_ns - last if last is not None else 0
+        if stream_gap_ns is not None and last is not None:
+            # Pairs delivered since the last one checked were dropped: the jump is the
+            # stream's own longest gap, not the time the processing took.
+            jump_ns = min(jump_ns, stream_gap_ns)
+        if jump_ns > max_jump_s * 1e9:
             self.counts.add('stamp_jumps')
-            warnings.append(f'stamp jumped forward by {(stamp_ns - last) * 1e-9:.1f} s '
+            warnings.append(f'stamp jumped forward by {jump_ns * 1e-9:.1f} s '
                             f'(> pipeline.max_stamp_jump_s {max_jump_s:g} s): '
                             'warm start dropped')
             return True

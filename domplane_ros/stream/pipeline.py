@@ -164,7 +164,8 @@ class PlanePipeline:
         self._trust.reset()
 
     def process(self, left: np.ndarray, right: np.ndarray, stamp_ns: int,
-                reset: bool = False, joint_speed: float | None = None) -> FrameResult:
+                reset: bool = False, joint_speed: float | None = None,
+                stream_gap_ns: int | None = None) -> FrameResult:
         """Estimate the plane for one stereo pair.
 
         Args:
@@ -175,6 +176,11 @@ class PlanePipeline:
                 warm start.
             reset: Drop the warm start before this frame.
             joint_speed: Largest head joint speed in rad/s, if known (None: no joint input).
+            stream_gap_ns: The longest gap between consecutive pairs the cameras delivered
+                since the last pair processed, when the caller drops pairs (the node's
+                newest-wins hand-over while a search runs): the stamp jump is this gap, so a
+                slow search does not drop the warm start it is building. None: the jump is
+                measured from the last pair processed.
 
         Returns:
             The :class:`FrameResult`; it is never a non-finite homography. Pairs that
@@ -191,7 +197,7 @@ class PlanePipeline:
         """
         t0 = time.perf_counter()
         _check_frame(left, right, joint_speed)
-        check = self.checks.check(left, right, stamp_ns, self.config.pipeline)
+        check = self.checks.check(left, right, stamp_ns, self.config.pipeline, stream_gap_ns)
         if reset or check.reset:
             self.reset('; '.join(check.warnings) if check.reset and check.warnings
                        else 'the warm start was dropped before this pair (a reset pair)')

@@ -259,8 +259,9 @@ class StreamSession:
                 ) -> ProcessedPair | None:
         """Decode a pair, run the pipeline on it and update the bookkeeping.
 
-        The stamp given to the pipeline is the left image's, and ``pair.after_reset`` drops
-        the warm start.
+        The stamp given to the pipeline is the left image's (a stamp jump is ``pair.gap_ns``,
+        the cameras' gap, not the time since the last pair processed), and
+        ``pair.after_reset`` drops the warm start.
 
         Args:
             pair: A pair from :meth:`receive` (its items are ``sensor_msgs/Image`` or
@@ -287,7 +288,8 @@ class StreamSession:
         image_warning = self._image_warning(pair, (left, right), bits)
         with self._pipeline_lock:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,
-                                           reset=pair.after_reset, joint_speed=joint_speed)
+                                           reset=pair.after_reset, joint_speed=joint_speed,
+                                           stream_gap_ns=pair.gap_ns)
             state = self.pipeline.state
         frame = ProcessedPair(pair, result, left, 1e3 * (time.perf_counter() - t0),
                               image_warning)

@@ -33,7 +33,7 @@ or a queue (see :meth:`SyncStats.accounted`).
 from __future__ import annotations
 
 import bisect
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 import numbers
 import threading
@@ -55,6 +55,10 @@ class Pair:
         right: The right item, as given to :meth:`ApproximateTimeSync.add`.
         after_reset: True for the first pair emitted after a reset (stamps went backwards),
             so that state carried across frames (a warm start) should be dropped.
+        gap_ns: The cameras' own gap before this pair: its left stamp minus the left stamp of
+            the pair emitted before it (None for the first pair and after a reset). A consumer
+            that drops pairs (newest-wins) folds the dropped pairs' gaps in with
+            :func:`merge_dropped`, so a gap stays visible however many pairs were dropped.
 
     """
 
@@ -63,6 +67,7 @@ class Pair:
     left: Any
     right: Any
     after_reset: bool = False
+    gap_ns: int | None = None
 
     @property
     def stamp_ns(self) -> int:
@@ -122,6 +127,18 @@ class SyncStats:
         return 2 * self.pairs_emitted + self.dropped + self.queued_left + self.queued_right
 
 
+def merge_dropped(dropped: Pair, newer: Pair) -> Pair:
+    """Return ``newer`` carrying what a consumer must not lose when it drops ``dropped``.
+
+    A newest-wins hand-over (the node's worker busy with a search) replaces a pair not taken
+    yet by the newer one; the stream's events between them still count: a reset before the
+    dropped pair (``after_reset``) and the longest gap (``gap_ns``).
+    """
+    gaps = [gap for gap in (dropped.gap_ns, newer.gap_ns) if gap is not None]
+    return replace(newer, after_reset=dropped.after_reset or newer.after_reset,
+                   gap_ns=max(gaps) if gaps else None)
+
+
 class ApproximateTimeSync:
     """Greedy approximate-time synchroniser for a stereo pair of message streams.
 
@@ -165,6 +182,7 @@ class ApproximateTimeSync:
         self._items: dict[str, list[Any]] = {side: [] for side in _SIDES}
         self._last_emitted: dict[str, int | None] = dict.fromkeys(_SIDES)
         self._last_received: dict[str, int | None] = dict.fromkeys(_SIDES)
+        self._last_pair_left: int | None = None
         self._reset_pending = False
         self._counts = {
             'received_left': 0, 'received_right': 0, 'pairs_emitted': 0,
@@ -279,6 +297,7 @@ class ApproximateTimeSync:
             self._stamps[side] = [stamps[i] for i in keep]
             self._items[side] = [items[i] for i in keep]
             self._last_emitted[side] = None
+        self._last_pair_left = None
         self._counts['resets'] += 1
         self._reset_pending = True
 
@@ -315,10 +334,13 @@ class ApproximateTimeSync:
         self._last_emitted[other] = other_stamp
         self._counts['pairs_emitted'] += 1
         after_reset, self._reset_pending = self._reset_pending, False
+        left_stamp = stamp_ns if side == 'left' else other_stamp
+        previous, self._last_pair_left = self._last_pair_left, left_stamp
+        gap = None if previous is None else left_stamp - previous
         if side == 'left':
-            pair = Pair(stamp_ns, other_stamp, item, other_item, after_reset)
+            pair = Pair(stamp_ns, other_stamp, item, other_item, after_reset, gap)
         else:
-            pair = Pair(other_stamp, stamp_ns, other_item, item, after_reset)
+            pair = Pair(other_stamp, stamp_ns, other_item, item, after_reset, gap)
         return [pair]
 
     def _closest(self, side: str, stamp_ns: int) -> int | None:

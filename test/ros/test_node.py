@@ -211,10 +211,10 @@ def test_slow_processing_keeps_newest_pair_and_counts_drops(ros_context, scene):
     processed_stamps = []
     real_process = h.node.pipeline.process
 
-    def slow_process(left, right, stamp_ns, reset=False, joint_speed=None):
+    def slow_process(left, right, stamp_ns, reset=False, joint_speed=None, stream_gap_ns=None):
         time.sleep(0.25)
         processed_stamps.append(stamp_ns)
-        return real_process(left, right, stamp_ns, reset, joint_speed)
+        return real_process(left, right, stamp_ns, reset, joint_speed, stream_gap_ns)
 
     h.node.pipeline.process = slow_process
     try:

@@ -16,6 +16,7 @@ from domplane_ros.core.estimator import PlaneEstimate
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.image import gray_to_image_fields, message_to_gray
 from domplane_ros.errors import ImageDecodeError
+from domplane_ros.ros.handover import NewestSlot
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.stream.health import (_identical, clipped_reason, inlier_spread,
                                         input_diagnostic_values, PairChecks, problem_key,
@@ -23,7 +24,7 @@ from domplane_ros.stream.health import (_identical, clipped_reason, inlier_sprea
 import domplane_ros.stream.pipeline as pipeline_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import ERROR, OK, plane_status, WARN
-from domplane_ros.stream.sync import ApproximateTimeSync
+from domplane_ros.stream.sync import ApproximateTimeSync, merge_dropped
 from hypothesis import given, settings, strategies as st
 import numpy as np
 import pytest
@@ -300,6 +301,44 @@ def test_stamps_backwards_or_jumping_forward_drop_the_warm_start(scene):
     assert pipeline.checks.counts['stamp_jumps'] == 1
     result = pipeline.process(scene.left, scene.right, STAMP0 + 129 * S)
     assert not result.reinitialised and not result.warnings   # 9 s < 10 s
+
+
+def test_a_gap_the_processing_made_is_not_a_stamp_jump(scene):
+    # The node's newest-wins hand-over drops the pairs that arrive while a search runs: the
+    # jump is the cameras' own gap (Pair.gap_ns), not the time since the last pair processed.
+    config = PlaneNodeConfig()
+    pipeline = PlanePipeline(replace(config, pipeline=replace(config.pipeline,
+                                                              max_stamp_jump_s=1.0)))
+    pipeline.process(scene.left, scene.right, STAMP0)
+    result = pipeline.process(scene.left, scene.right, STAMP0 + 3 * S // 2,
+                              stream_gap_ns=S // 20)
+    assert not result.warnings and pipeline.checks.counts['stamp_jumps'] == 0
+    # A gap in the cameras' stream (1.5 s among the pairs dropped since) is one.
+    result = pipeline.process(scene.left, scene.right, STAMP0 + 4 * S,
+                              stream_gap_ns=3 * S // 2)
+    assert result.reinitialised and pipeline.checks.counts['stamp_jumps'] == 1
+    assert 'stamp jumped forward by 1.5 s' in result.warnings[0]
+
+
+def test_sync_pairs_carry_the_cameras_gap_and_a_newest_wins_slot_keeps_it():
+    sync = ApproximateTimeSync(0.01, 5)
+    slot = NewestSlot(merge=merge_dropped)
+    pairs = []
+    for k, t in enumerate((0, S // 10, 2 * S, 2 * S + S // 10)):
+        sync.add('left', STAMP0 + t, k)
+        pairs += sync.add('right', STAMP0 + t + 1000, k)
+    assert [p.gap_ns for p in pairs] == [None, S // 10, 19 * S // 10, S // 10]
+    for pair in pairs[1:]:      # the worker busy: the second and third pairs are dropped
+        slot.put(pair)
+    kept = slot.take_nowait()
+    assert slot.dropped == 2 and kept.left == 3 and kept.gap_ns == 19 * S // 10
+    sync.add('left', STAMP0, 'back')          # stamps went backwards: a reset
+    (after,) = sync.add('right', STAMP0, 'back')
+    assert after.after_reset and after.gap_ns is None
+    slot.put(after)
+    slot.put(pairs[1])
+    merged = slot.take_nowait()   # the reset is not lost with the pair that carried it
+    assert merged.after_reset and merged.left == 1
 
 
 def test_zero_stamps_are_warned():

@@ -152,7 +152,7 @@ def test_stamps_going_backwards_reset_and_flag_next_pair():
     _feed(sync, [('left', t0, 'L0'), ('right', t0, 'R0'), ('left', t0 + PERIOD, 'L1')])
     # The bag loops: both cameras start again at 0.
     assert sync.add_right(t0 + PERIOD + MS, 'R1 old') == [Pair(
-        t0 + PERIOD, t0 + PERIOD + MS, 'L1', 'R1 old')]
+        t0 + PERIOD, t0 + PERIOD + MS, 'L1', 'R1 old', gap_ns=PERIOD)]
     assert sync.add_left(t0 + 2 * PERIOD, 'L2 old') == []  # Queued, waiting for R2.
     assert sync.add_left(0, 'L0 new') == []
     stats = _check_accounting(sync)
