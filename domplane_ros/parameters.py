@@ -232,8 +232,9 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               '(grey >= 253) pixels is refused (1 disables; images over 0.5 MP are counted '
               'on a regular grid of about 0.5 MP).', 0.01, 1.0),
     ParamSpec('pipeline.max_stamp_jump_s', 10.0, 'float',
-              'A pair stamped more than this many seconds after the last one drops the warm '
-              'start (as a stamp going backwards does).', 0.001, 1e6),
+              'A pair stamped more than this many seconds after the pair the cameras delivered '
+              'before it drops the warm start (as a stamp going backwards does); pairs the node '
+              'dropped while busy do not make a gap.', 0.001, 1e6),
     ParamSpec('pipeline.max_tracking_frames', 2, 'int',
               "Frames in the 'tracking' state (the last homography carried forward through "
               "the cameras' tracked motion) after a failed or suspicious estimate before the "
