@@ -20,10 +20,13 @@ export ROS_DOMAIN_ID ?= $(shell echo $$(( RANDOM % 200 + 1 )))
 
 venv: $(VENV)/.installed
 
-# Third-party requirements: only when requirements.txt changes.
+# Third-party requirements: only when requirements.txt changes. pip byte-compiles what it
+# installs on one core; compileall does it on every core (77 s -> 62 s for the whole step on
+# this 2-core machine, measured 2026-12-02), and the .pyc files are still there for every run.
 $(VENV)/.stamp: requirements.txt
 	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
-	$(VPY) -m pip install --quiet --disable-pip-version-check -r requirements.txt
+	$(VPY) -m pip install --quiet --disable-pip-version-check --no-compile -r requirements.txt
+	$(VPY) -m compileall -q -j 0 $(VENV)/lib > /dev/null
 	touch $@
 
 # The package itself, editable, so the console scripts in .venv/bin (plane_node, plane_replay)
