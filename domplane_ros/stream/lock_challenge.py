@@ -26,7 +26,7 @@ from domplane_ros.stream.candidates import CandidateWork
 from domplane_ros.stream.challenge import (Challenge, COARSE, COARSE_START, COARSE_STEP,
                                            PRIOR_START, PRIOR_STARTS, SCREEN, Task)
 from domplane_ros.stream.frame import PairStep
-from domplane_ros.stream.refusals import challenger_won
+from domplane_ros.stream.refusals import challenge_refused, challenger_won
 from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
 import numpy as np
@@ -129,7 +129,9 @@ class LockChallenge:
         if best is None or verdict is None or not trust.beats(verdict, lock):
             return None
         done = self._work().finished(step, problem, feats, size, best, verdict)
-        if trust.ground_refusal(done[0].homography, *size, done[1].verification):
+        refused = trust.ground_refusal(done[0].homography, *size, done[1].verification)
+        if refused:
+            step.refusals.append(challenge_refused(refused))
             return None
         step.warm_start = 'challenger'
         step.lock_lost = challenger_won(verdict.peak_score, CHALLENGE_MARGIN, lock.peak_score)

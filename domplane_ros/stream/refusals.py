@@ -21,8 +21,10 @@ Refusal kinds (a refused plane or warm start, :data:`REFUSAL_KINDS`):
 * ``cut``: the lock as a warm start, because the previous pair cannot be tracked into this
   one; ``view change``: the lock of a pair with too few corners that its texture refutes.
 * ``search``: a search's finished winner, or the search's end without a plane.
+* ``challenge``: a challenger that beat the lock, refused once finished as not the prior's
+  ground (its roll, slope, or the bands rule: ``TrustGate.ground_refusal``); the lock stays.
 
-Lock-loss kinds (:data:`LOCK_LOSS_KINDS`): the first six refusal kinds above but ``estimate``
+Lock-loss kinds (:data:`LOCK_LOSS_KINDS`): the first seven refusal kinds above but ``estimate``
 (a warm refusal that starts a search in the same pair), ``challenger`` (a plane that
 explained clearly more of the image replaced the lock), ``tracking`` (the lock was carried
 ``pipeline.max_tracking_frames`` pairs without a plane) and ``reset`` (the warm start was
@@ -43,11 +45,12 @@ ESTIMATE = 'estimate'
 CUT = 'cut'
 VIEW_CHANGE = 'view change'
 SEARCH = 'search'
+CHALLENGE = 'challenge'
 CHALLENGER = 'challenger'
 TRACKING_ENDED = 'tracking'
 RESET = 'reset'
 
-REFUSAL_KINDS = (REFERENCE, BOTTOM, DROP, GATE, ESTIMATE, CUT, VIEW_CHANGE, SEARCH)
+REFUSAL_KINDS = (REFERENCE, BOTTOM, DROP, GATE, ESTIMATE, CUT, VIEW_CHANGE, SEARCH, CHALLENGE)
 LOCK_LOSS_KINDS = (REFERENCE, BOTTOM, DROP, GATE, CUT, VIEW_CHANGE, CHALLENGER,
                    TRACKING_ENDED, RESET)
 # The diagnostics key of the pair's lock loss, of the last lock loss, and of the count of
@@ -89,6 +92,12 @@ def challenger_won(challenger_peak: float, margin: float, lock_peak: float) -> R
     """Return the lock loss to a challenger (peak scores; ``margin``: the least ratio)."""
     return Refusal(CHALLENGER, 'a challenger explained clearly more of the image (peak score '
                    f"{challenger_peak:.2f} > {margin:g} x the lock's {lock_peak:.2f})")
+
+
+def challenge_refused(reason: str) -> Refusal:
+    """Return the refusal of a challenger that beat the lock but is not the ground."""
+    return Refusal(CHALLENGE, f'a challenger beat the lock but is refused: {reason}; '
+                   'the lock stays')
 
 
 def tracking_ended(carried: int, reason: str) -> Refusal:

@@ -238,6 +238,40 @@ def test_the_challenger_replaces_a_lock_stuck_on_a_worse_plane(scene, monkeypatc
         assert 'challenger' not in starts and min(errors) > 1.5, (starts, errors)
 
 
+def test_a_challenger_refused_as_not_the_ground_is_recorded_and_the_lock_stays(
+        scene, monkeypatch):
+    # As above (the lock stuck 2 px off, the challenger finds the floor), but the gate's ground
+    # rules refuse the floor: the lock stays, and the refusal is on record (the pair's refusals
+    # and the counts since start), not silently dropped (review of session 20).
+    settings = replace(LOW_GATE, challenge_period=3)
+    pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
+    stamp = 0
+    for _ in range(3):
+        pipeline.process(scene.left, scene.right, stamp)
+        stamp += PERIOD_NS
+    worse = _shifted(scene.homography, 2.0)
+    stuck = _estimate_at(scene, worse)
+    monkeypatch.setattr(pipeline._warm, 'estimate', lambda *args: stuck)
+    monkeypatch.setattr(pipeline._warm, 'anchored', lambda problem, init, estimate: estimate)
+    real = TrustGate.ground_refusal
+
+    def refuse_the_floor(self, homography, width, height, check=None):
+        if plane_error_px(scene, homography) < 1.0:
+            return 'not the ground: refused by this test'
+        return real(self, homography, width, height, check)
+
+    monkeypatch.setattr(TrustGate, 'ground_refusal', refuse_the_floor)
+    results = []
+    for _ in range(4):
+        results.append(pipeline.process(scene.left, scene.right, stamp))
+        stamp += PERIOD_NS
+    assert all(r.ok and plane_error_px(scene, r.homography) > 1.5 for r in results)
+    assert all(r.warm_start != 'challenger' and r.lock_lost is None for r in results)
+    refused = [f for r in results for f in r.refusals if f.kind == 'challenge']
+    assert refused and 'refused by this test' in refused[0].reason
+    assert pipeline.stats.refusals.planes_refused['challenge'] == len(refused)
+
+
 def test_the_challenger_does_not_refine_starts_at_the_lock(scene, monkeypatch):
     settings = replace(LOW_GATE, challenge_period=3)
     pipeline = PlanePipeline(replace(PlaneNodeConfig(), verification=settings))
