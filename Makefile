@@ -56,7 +56,7 @@ test: venv
 	status=0; \
 	$(RENDER_CACHE) $(ONE_THREAD) $(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) -n $(PYTEST_WORKERS) --dist loadfile \
 		-m 'not ros' test || status=$$?; \
-	$(RENDER_CACHE) $(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) -m ros test || status=$$?; \
+	$(RENDER_CACHE) $(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) -m ros test/ros || status=$$?; \
 	exit $$status
 
 lint: venv
