@@ -152,34 +152,23 @@ LOCK_BOTTOM_RATIO = 0.4
 # against the baseline reads up to 8.4 deg on rendered pairs (9.1 with every rough-rig tolerance
 # at its extreme), the least refused wrong plane 12.1 deg.
 # A ground plane about to be published (where its roll and slope are checked, ground_refusal)
-# and verified with a score under verification.accept_score + BANDS_SCORE_MARGIN (0.35 + 0.04
-# by default) must explain the lowest third of the region at least MIN_BOTTOM_OVER_TOP times as
-# well as the highest third (PlaneVerification.bottom_score, top_score), where the highest
-# explains at least MIN_TOP_FOR_BANDS: the ground seen from above is nearest, and best resolved,
-# at the bottom of the image; weak evidence for a plane that explains the top better is a plane
-# through distant structure above the ground (TrustGate.bands_refusal). Round 21
-# (docs/BENCHMARKS.md), default prior: the three planes published > 5 px off on KITTI 000046
-# crops (tuning seeds 48-247) ran through trees, poles and the far road above a strip of near
-# road, bottom / top 0.58, 0.19, 0.34 at confidence 0.93, 0.79, 0.99 (a 4.6 px one 0.65); the
-# weak correct planes of that run at least 18, of evaluate_trust's tuning seeds 0-29 (11 of 431
-# planes) at least 1.01 (conf 0.99, a floor growing 0.057 px per row). MIN_TOP_FOR_BANDS: a top
-# third explained under it says nothing (the wrong planes above explain 0.29-0.42 of it). 0:
-# off (as before round 21).
-# BANDS_SCORE_MARGIN (round 22, docs/BENCHMARKS.md): with the co-visible score (the default
-# since session 20) the same class scores just over accept_score, where the confidence is 1
-# (crop 191, 7.3 px off, 0.353; crop 32 of the real rigs' tuning seeds 24-47, 7.2 px, 0.357).
-# Every plane at a publish site of the tuning runs (crops 48-247, real rigs 24-47, both priors;
-# evaluate_trust's seeds 0-39, every case) with its top third over MIN_TOP_FOR_BANDS and bottom
-# / top under MIN_BOTTOM_OVER_TOP: the wrong ones scored 0.26-0.357, the correct ones 0.417 and
-# 0.427 (sized floors seed 37, nominal and rough head: a 64 cm checker whose near squares the
-# shrink aliases, bottom / top 0.37 and 0.34, as low as the wrong planes'), so the ratio cannot
-# tell them apart there, the score can: the bound 0.39 sits in that gap, 0.033 over the wrong
-# and 0.027 under the correct planes (a thin gap, measured on 2 + 2 planes: no proof). Correct
-# planes under 0.39 read bottom / top at least 0.98 (floors_rough seed 0, 0.385). 0: the rule
-# looks only under accept_score, as in round 21.
+# and verified with less than full confidence (its score under verification.accept_score) must
+# explain the lowest third of the region at least MIN_BOTTOM_OVER_TOP times as well as the
+# highest third (PlaneVerification.bottom_score, top_score), where the highest explains at least
+# MIN_TOP_FOR_BANDS: the ground seen from above is nearest, and best resolved, at the bottom of
+# the image; weak evidence for a plane that explains the top better is a plane through distant
+# structure above the ground (TrustGate.bands_refusal). Round 21 (docs/BENCHMARKS.md), default
+# prior: the three planes published > 5 px off on KITTI 000046 crops (tuning seeds 48-247) ran
+# through trees, poles and the far road above a strip of near road, bottom / top 0.58, 0.19,
+# 0.34 at confidence 0.93, 0.79, 0.99 (a 4.6 px one 0.65); the weak correct planes of that run
+# at least 18, of evaluate_trust's tuning seeds 0-29 (11 of 431 planes) at least 1.01 (conf
+# 0.99, a floor growing 0.057 px per row). At full confidence correct rendered floors read down
+# to 0.33: no rule there. MIN_TOP_FOR_BANDS: a top third explained under it says nothing (the
+# wrong planes above explain 0.29-0.42 of it). 0: off (as before round 21). With the co-visible
+# score (the default since session 20) crop 191's wrong plane scores 0.353 >= accept_score:
+# full confidence, not looked at, published 7.3 px off (review of session 20; docs/METHOD.md).
 MIN_BOTTOM_OVER_TOP = 0.75
 MIN_TOP_FOR_BANDS = 0.1
-BANDS_SCORE_MARGIN = 0.04
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -282,11 +271,6 @@ class TrustGate:
         """Return verify_plane's own-region argument: planes ``any`` are judged there too."""
         return {'own_region': True} if self.settings.plane == 'any' else {}
 
-    @property
-    def accept_score(self) -> float:
-        """Return the score at and above which a plane has full confidence (min_score + 0.1)."""
-        return self.settings.min_score + 0.1
-
     def config(self, width: int) -> VerificationConfig:
         """Return the verification settings for images ``width`` pixels wide."""
         if width not in self._configs:
@@ -304,7 +288,7 @@ class TrustGate:
             self._configs[width] = VerificationConfig(
                 working_width_px=min(working, width),
                 reject_score=self.settings.min_score - 0.1,
-                accept_score=self.accept_score,
+                accept_score=self.settings.min_score + 0.1,
                 weight_by_contrast=self.settings.plane != 'any',
                 covisible=self.settings.covisible and self.settings.plane != 'any')
         return self._configs[width]
@@ -390,20 +374,18 @@ class TrustGate:
     def bands_refusal(self, check: PlaneVerification) -> str:
         """Return why a weak ground plane is refused for explaining its top best ('' if not).
 
-        Verified with a score under :attr:`accept_score` + :data:`BANDS_SCORE_MARGIN`, it must
-        explain the lowest third of the region at least :data:`MIN_BOTTOM_OVER_TOP` times as
-        well as the highest, where the highest explains at least :data:`MIN_TOP_FOR_BANDS`.
-        Never with ``verification.plane: any``.
+        Verified with less than full confidence, it must explain the lowest third of the region
+        at least :data:`MIN_BOTTOM_OVER_TOP` times as well as the highest, where the highest
+        explains at least :data:`MIN_TOP_FOR_BANDS`. Never with ``verification.plane: any``.
         """
-        bound = self.accept_score + BANDS_SCORE_MARGIN
         if (self.settings.plane == 'any' or MIN_BOTTOM_OVER_TOP <= 0.0
-                or check.score >= bound or check.top_score < MIN_TOP_FOR_BANDS
+                or check.confidence >= 1.0 or check.top_score < MIN_TOP_FOR_BANDS
                 or check.bottom_score >= MIN_BOTTOM_OVER_TOP * check.top_score):
             return ''
         return ('not the ground: the plane explains '
                 f'{100 * check.top_score:.0f} % of the top of the region but '
                 f'{100 * check.bottom_score:.0f} % of its bottom (< {MIN_BOTTOM_OVER_TOP:g} x) at '
-                f'score {check.score:.2f} < {bound:.2f}; a plane through distant structure above '
+                f'confidence {check.confidence:.2f} < 1; a plane through distant structure above '
                 'the ground?')
 
     def slope_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
