@@ -26,7 +26,7 @@ venv: $(VENV)/.installed
 $(VENV)/.stamp: requirements.txt
 	test -x $(VPY) || $(PYTHON) -m venv $(VENV)
 	$(VPY) -m pip install --quiet --disable-pip-version-check --no-compile -r requirements.txt
-	$(VPY) -m compileall -q -j 0 $(VENV)/lib > /dev/null
+	$(VPY) -m compileall -q -j 0 $(VENV)/lib
 	touch $@
 
 # The package itself, editable, so the console scripts in .venv/bin (plane_node, plane_replay)

@@ -25,8 +25,8 @@ CSV_COLUMNS = (
     'reason', 'fast_motion', 'lock_lost', 'refusals',
 )
 # lock_lost: why the lock held before the pair was lost in it ('kind: reason', '' if not);
-# refusals: every refusal that turned the pair's course, a JSON list of 'kind: reason' (the
-# kinds: domplane_ros.stream.refusals).
+# refusals: every refusal that turned the pair's course, and a challenger refused (the lock
+# stays), a JSON list of 'kind: reason' (the kinds: domplane_ros.stream.refusals).
 
 
 class CsvOutput:

@@ -54,7 +54,8 @@ class FrameResult:
         refusals: Every refusal that turned this pair's course, in order
             (:mod:`domplane_ros.stream.refusals`): the warm plane (after its widened retry)
             or the warm start, the photometric refinement of a lock, the search's finished
-            winner and the search's end. ``reason`` is the last word only: a warm plane
+            winner and the search's end, and a challenger refused as not the ground (the
+            lock stays). ``reason`` is the last word only: a warm plane
             refused and re-found by a search in the same pair has a plane, no reason, and
             its refusal here. Candidates judged inside a search are not listed.
         lock_lost: Why the lock held before this pair was lost in it, or None.

@@ -2,7 +2,8 @@
 
 A refused warm plane does not end a pair: the pipeline searches in the same pair, and what
 the search says (a plane, or its own reason) is the pair's outcome. So that the first refusal
-is not lost, each pair keeps every refusal that turned its course, in order
+is not lost, each pair keeps every refusal that turned its course, and a challenger refused
+while the lock stays, in order
 (:attr:`~domplane_ros.stream.frame.FrameResult.refusals`), and the lock loss, if any
 (:attr:`~domplane_ros.stream.frame.FrameResult.lock_lost`); :class:`RefusalCounts` counts
 them since the pipeline started, for ``/diagnostics`` and the replay's summary. No ROS

@@ -33,7 +33,7 @@ from domplane_ros.stream.health import homography_problem, InputCounts, StampChe
 from domplane_ros.stream.joints import JointSpeeds
 from domplane_ros.stream.pipeline import FrameResult, PlanePipeline
 from domplane_ros.stream.status import plane_status
-from domplane_ros.stream.sync import ApproximateTimeSync, Pair, Side
+from domplane_ros.stream.sync import ApproximateTimeSync, merge_dropped, Pair, Side
 import numpy as np
 
 # The status's latency statistics cover the last this many pairs.
@@ -213,6 +213,9 @@ class StreamSession:
         # synchroniser (receive, update_config).
         self._pipeline_lock = threading.Lock()
         self._input_lock = threading.Lock()
+        # A pair that did not decode, merged into the next (merge_dropped): its reset and its
+        # gap still count, or the next pair's short gap would hide a long one before it.
+        self._undecoded: Pair | None = None
 
     def update_config(self, config: PlaneNodeConfig) -> None:
         """Use a new configuration from the next message on, keeping the warm start.
@@ -272,11 +275,15 @@ class StreamSession:
 
         Returns:
             The processed pair, or None if an image did not decode (counted, and kept in
-            :attr:`last_error` and :attr:`last_decode_error`).
+            :attr:`last_error` and :attr:`last_decode_error`; its reset and its cameras' gap
+            go on with the next pair).
 
         """
         t0 = time.perf_counter()
         bits = self.config.image.mono16_bits
+        if self._undecoded is not None:
+            pair = merge_dropped(self._undecoded, pair)
+        self._undecoded = pair
         try:
             # Read-only, views of the messages' data where the encoding allows (no copy of
             # a 4K frame); the pair holds its messages, which nothing changes.
@@ -285,6 +292,7 @@ class StreamSession:
         except ImageDecodeError as err:
             self._decode_failed(err)
             return None
+        self._undecoded = None
         image_warning = self._image_warning(pair, (left, right), bits)
         with self._pipeline_lock:
             result = self.pipeline.process(left, right, pair.left_stamp_ns,

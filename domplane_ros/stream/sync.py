@@ -132,11 +132,13 @@ def merge_dropped(dropped: Pair, newer: Pair) -> Pair:
 
     A newest-wins hand-over (the node's worker busy with a search) replaces a pair not taken
     yet by the newer one; the stream's events between them still count: a reset before the
-    dropped pair (``after_reset``) and the longest gap (``gap_ns``).
+    dropped pair (``after_reset``) and the longest gap (``gap_ns``). A gap not known on either
+    (None: a first pair, a pair after a reset) leaves it unknown, so the consumer measures the
+    jump from the last pair it processed.
     """
-    gaps = [gap for gap in (dropped.gap_ns, newer.gap_ns) if gap is not None]
+    gaps = (dropped.gap_ns, newer.gap_ns)
     return replace(newer, after_reset=dropped.after_reset or newer.after_reset,
-                   gap_ns=max(gaps) if gaps else None)
+                   gap_ns=None if None in gaps else max(gaps))
 
 
 class ApproximateTimeSync:

@@ -339,6 +339,7 @@ def test_sync_pairs_carry_the_cameras_gap_and_a_newest_wins_slot_keeps_it():
     slot.put(pairs[1])
     merged = slot.take_nowait()   # the reset is not lost with the pair that carried it
     assert merged.after_reset and merged.left == 1
+    assert merged.gap_ns is None  # a gap unknown on one side: measured from the last stamp
 
 
 def test_zero_stamps_are_warned():

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import SimpleNamespace
 
 from domplane_ros.config import PlaneNodeConfig, SyncConfig
@@ -153,3 +154,24 @@ def test_a_status_built_while_a_pair_is_processed_shows_a_consistent_state():
     values = dict(session.status(0.1)[2])
     assert values['lock state'] == session.pipeline.state
     assert values['warm start'] == (session.last_result.warm_start or 'none')
+
+
+def test_a_pair_that_did_not_decode_passes_its_gap_on():
+    # The stamp jump is the cameras' gap before a pair (Pair.gap_ns); a pair that did not
+    # decode never reaches the pipeline, so its gap (here 30 s) goes on with the next pair,
+    # whose own gap (33 ms) would otherwise hide it.
+    config = PlaneNodeConfig()
+    config = replace(config, pipeline=replace(config.pipeline, max_stamp_jump_s=1.0))
+    session = StreamSession(config, start=0.0)
+    ms = 10**6
+    for t_ms, encoding in ((0, 'mono8'), (33, 'mono8'), (30_000, 'nv12'), (30_033, 'mono8')):
+        for side in ('left', 'right'):
+            pairs, _ = session.receive(side, T0 + t_ms * ms,
+                                       _msg(T0 + t_ms * ms, encoding, t_ms), t_ms * 1e-3)
+        (pair,) = pairs
+        frame = session.process(pair)
+        assert (frame is None) == (encoding == 'nv12')
+    assert session.counters.decode_errors == 1
+    assert session.counts['stamp_jumps'] == 1
+    assert frame.result.reinitialised
+    assert 'stamp jumped forward by 30.0 s' in ' '.join(frame.result.warnings)
