@@ -17,7 +17,7 @@ from domplane_ros.core import verification
 from domplane_ros.core.estimator import estimate_plane, TwoStep
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
-from domplane_ros.sim.generators import random_scene, scene_sequence
+from domplane_ros.sim.generators import indoor_scene, random_scene, scene_sequence
 from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
                                    random_rig_error, RigError, rough_rig, swapped)
 from domplane_ros.sim.textures import SIZED_FLOOR_KINDS
@@ -95,6 +95,30 @@ def test_a_lock_whose_score_collapses_is_refused(scene, monkeypatch):
     # Not locked (a new search): the absolute threshold alone applies.
     assert gate.judge(scene.left, scene.right, scene.homography).accepted == weaker.accepted
 
+
+
+def test_a_lock_whose_view_changed_is_held_against_its_recent_scores():
+    # Round 23 (mutants): with the drop_ratio check off only the test above (a stubbed score)
+    # failed. The lock started on a faint indoor floor (seed 3: score 0.31, 89 % of the
+    # bottom); the view changed under it to a floor scoring 0.70 (random scene 0, three pairs).
+    # A warm plane 4 px off that floor scores 0.29 with 40 % of the bottom: above 0.7 x and
+    # 0.4 x what the lock started from, so its reference keeps it; its recent median refuses it.
+    gate = TrustGate(VerificationSettings())
+    start = indoor_scene(3)
+    gate.record(gate.judge(start.left, start.right, start.homography, locked=True))
+    view = random_scene(0)
+    for _ in range(3):
+        held = gate.judge(view.left, view.right, view.homography, locked=True)
+        assert held.accepted, held.reason
+        gate.record(held)
+    slid = _shifted(view.homography, 4.0)
+    assert plane_error_px(view, slid) > 3.5
+    verdict = gate.judge(view.left, view.right, slid, locked=True)
+    reference = gate.lock_reference
+    assert verdict.score >= trust_module.LOCK_REFERENCE_RATIO * reference.score
+    assert verdict.verification.bottom_score >= (
+        trust_module.LOCK_BOTTOM_RATIO * reference.bottom_score)
+    assert not verdict.accepted and verdict.lock_refusal == 'drop', verdict.reason
 
 # 186: a cut to a scene of 9 corners (evaluate_trust tuning seed 186): the lock, refined
 # photometrically, gives no plane; carried as 'tracking' it re-locked after 4 pairs.
