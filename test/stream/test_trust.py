@@ -196,6 +196,23 @@ def test_a_challenger_needs_clearly_more_than_the_lock(scene):
                                                'refused'), lock)
 
 
+
+def test_a_challenger_no_better_than_a_true_lock_does_not_replace_it():
+    # Round 23 (mutants): with the margin of TrustGate.beats at 0 only the test above (stubbed
+    # peak scores) failed. Locked on the floor of a rendered sequence and challenged on every
+    # pair, the challengers refined from the prior's starts land on the same floor: without
+    # the 1.2 x margin one replaced the lock with itself (pair 6; at 640 x 480 pairs 3 and 6),
+    # a lost lock and a reset history for nothing.
+    frames = scene_sequence(8, 3, width=320, height=240, floor='random')
+    base = PlaneNodeConfig()
+    pipeline = PlanePipeline(replace(base, verification=replace(base.verification,
+                                                                challenge_period=1)))
+    results = [pipeline.process(f.left, f.right, i * PERIOD_NS) for i, f in enumerate(frames)]
+    assert all(r.ok and plane_error_px(f, r.homography) < 0.5 for f, r in zip(frames, results))
+    assert sum(r.timings_ms['challenge'] > 0.0 for r in results) >= 6  # challenged throughout
+    assert [r.warm_start for r in results[1:]] == ['prediction'] * 7
+    assert all(r.lock_lost is None for r in results[1:])
+
 # A gate low enough that a plane 2 px off the truth still passes (score 0.31 against 0.36
 # for the truth on this scene, peak score 0.16 against 0.28): two verified planes, one
 # clearly better.
