@@ -377,7 +377,6 @@ def test_prior_search_over_frames_equals_the_one_shot_search():
     assert best is None and rejected == 'no'
 
 
-
 @pytest.mark.parametrize('seed', [0, 1, 2])
 def test_the_prior_search_keeps_the_candidate_that_explains_the_most_features(seed):
     # Round 23 (mutants): keeping the worst refined candidate instead of the best passed every
@@ -398,6 +397,7 @@ def test_the_prior_search_keeps_the_candidate_that_explains_the_most_features(se
         best, rejected = search.refine(order, EstimatorConfig())
         assert best is not None and best.ok and not rejected
         assert plane_error_px(best.homography, floor.homography, on_floor) < 0.5, order
+
 
 def test_every_failure_is_one_failed_estimate_value():
     collinear = np.c_[np.arange(10.0), np.arange(10.0)]

@@ -96,7 +96,6 @@ def test_a_lock_whose_score_collapses_is_refused(scene, monkeypatch):
     assert gate.judge(scene.left, scene.right, scene.homography).accepted == weaker.accepted
 
 
-
 def test_a_lock_whose_view_changed_is_held_against_its_recent_scores():
     # Round 23 (mutants): with the drop_ratio check off only the test above (a stubbed score)
     # failed. The lock started on a faint indoor floor (seed 3: score 0.31, 89 % of the
@@ -119,6 +118,7 @@ def test_a_lock_whose_view_changed_is_held_against_its_recent_scores():
     assert verdict.verification.bottom_score >= (
         trust_module.LOCK_BOTTOM_RATIO * reference.bottom_score)
     assert not verdict.accepted and verdict.lock_refusal == 'drop', verdict.reason
+
 
 # 186: a cut to a scene of 9 corners (evaluate_trust tuning seed 186): the lock, refined
 # photometrically, gives no plane; carried as 'tracking' it re-locked after 4 pairs.
@@ -196,7 +196,6 @@ def test_a_challenger_needs_clearly_more_than_the_lock(scene):
                                                'refused'), lock)
 
 
-
 def test_a_challenger_no_better_than_a_true_lock_does_not_replace_it():
     # Round 23 (mutants): with the margin of TrustGate.beats at 0 only the test above (stubbed
     # peak scores) failed. Locked on the floor of a rendered sequence and challenged on every
@@ -212,6 +211,7 @@ def test_a_challenger_no_better_than_a_true_lock_does_not_replace_it():
     assert sum(r.timings_ms['challenge'] > 0.0 for r in results) >= 6  # challenged throughout
     assert [r.warm_start for r in results[1:]] == ['prediction'] * 7
     assert all(r.lock_lost is None for r in results[1:])
+
 
 # A gate low enough that a plane 2 px off the truth still passes (score 0.31 against 0.36
 # for the truth on this scene, peak score 0.16 against 0.28): two verified planes, one
