@@ -7,10 +7,14 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from domplane_ros.sim.generators import scene_sequence
+from domplane_ros.config import VerificationSettings
+from domplane_ros.sim.generators import indoor_scene, scene_sequence
 from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
+from domplane_ros.stream.refusals import BOTTOM
+from domplane_ros.stream.trust import TrustGate
+import numpy as np
 import pytest
 from truth import drifting_lock_frames, stream_errors
 
@@ -123,3 +127,28 @@ def test_a_refused_lock_keeps_its_reason_when_the_search_refinds_it(faint_tiles,
     assert off[4].ok and off[4].warm_start == 'prediction' and not off[4].refusals
     assert pipeline.stats.refusals.locks_lost['reference'] == 0
     assert pipeline.stats.refusals.refound == 0
+
+
+def test_a_lock_that_keeps_its_score_but_loses_the_bottom_is_refused():
+    # Round 23 (mutants): with LOCK_BOTTOM_RATIO 0 every other test passed. On an indoor scene
+    # (seed 3) the floor scores 0.31 (89 % of the bottom, 0 % of the top); a ground plane
+    # through the floor at 2/3 of the height and tipped sideways (3.6 px off the floor)
+    # explains the far wall and scores 0.58 (top 79 %, bottom 28 %): full confidence, so no
+    # band rule, and above the lock's score, so neither its reference score nor its median
+    # refuse it. Only the bottom it lost does.
+    scene = indoor_scene(3)
+    height = scene.left.shape[0]
+    gate = TrustGate(VerificationSettings())
+    start = gate.judge(scene.left, scene.right, scene.homography, locked=True)
+    assert start.accepted, start.reason
+    gate.record(start)
+    hinge = 2.0 * height / 3.0
+    slid = np.array([[1.0, 0.05, -0.05 * hinge], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    slid = slid @ scene.homography
+    assert plane_error_px(scene, slid) > 3.0
+    verdict = gate.judge(scene.left, scene.right, slid, locked=True)
+    assert verdict.score > start.score  # the score alone would keep it
+    assert verdict.verification.bottom_score < 0.4 * start.verification.bottom_score
+    assert not verdict.accepted and verdict.lock_refusal == BOTTOM, verdict.reason
+    # The floor itself is still held.
+    assert gate.judge(scene.left, scene.right, scene.homography, locked=True).accepted

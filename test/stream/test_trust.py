@@ -17,7 +17,7 @@ from domplane_ros.core import verification
 from domplane_ros.core.estimator import estimate_plane, TwoStep
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
-from domplane_ros.sim.generators import random_scene, scene_sequence
+from domplane_ros.sim.generators import indoor_scene, random_scene, scene_sequence
 from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
                                    random_rig_error, RigError, rough_rig, swapped)
 from domplane_ros.sim.textures import SIZED_FLOOR_KINDS
@@ -96,6 +96,30 @@ def test_a_lock_whose_score_collapses_is_refused(scene, monkeypatch):
     assert gate.judge(scene.left, scene.right, scene.homography).accepted == weaker.accepted
 
 
+def test_a_lock_whose_view_changed_is_held_against_its_recent_scores():
+    # Round 23 (mutants): with the drop_ratio check off only the test above (a stubbed score)
+    # failed. The lock started on a faint indoor floor (seed 3: score 0.31, 89 % of the
+    # bottom); the view changed under it to a floor scoring 0.70 (random scene 0, three pairs).
+    # A warm plane 4 px off that floor scores 0.29 with 40 % of the bottom: above 0.7 x and
+    # 0.4 x what the lock started from, so its reference keeps it; its recent median refuses it.
+    gate = TrustGate(VerificationSettings())
+    start = indoor_scene(3)
+    gate.record(gate.judge(start.left, start.right, start.homography, locked=True))
+    view = random_scene(0)
+    for _ in range(3):
+        held = gate.judge(view.left, view.right, view.homography, locked=True)
+        assert held.accepted, held.reason
+        gate.record(held)
+    slid = _shifted(view.homography, 4.0)
+    assert plane_error_px(view, slid) > 3.5
+    verdict = gate.judge(view.left, view.right, slid, locked=True)
+    reference = gate.lock_reference
+    assert verdict.score >= trust_module.LOCK_REFERENCE_RATIO * reference.score
+    assert verdict.verification.bottom_score >= (
+        trust_module.LOCK_BOTTOM_RATIO * reference.bottom_score)
+    assert not verdict.accepted and verdict.lock_refusal == 'drop', verdict.reason
+
+
 # 186: a cut to a scene of 9 corners (evaluate_trust tuning seed 186): the lock, refined
 # photometrically, gives no plane; carried as 'tracking' it re-locked after 4 pairs.
 def _cut_run(before, after, seed):
@@ -170,6 +194,23 @@ def test_a_challenger_needs_clearly_more_than_the_lock(scene):
     assert gate.beats(scored(1.3 * lock.peak_score), lock)
     assert not gate.beats(trust_module.Verdict(False, scored(2 * lock.peak_score).verification,
                                                'refused'), lock)
+
+
+def test_a_challenger_no_better_than_a_true_lock_does_not_replace_it():
+    # Round 23 (mutants): with the margin of TrustGate.beats at 0 only the test above (stubbed
+    # peak scores) failed. Locked on the floor of a rendered sequence and challenged on every
+    # pair, the challengers refined from the prior's starts land on the same floor: without
+    # the 1.2 x margin one replaced the lock with itself (pair 6; at 640 x 480 pairs 3 and 6),
+    # a lost lock and a reset history for nothing.
+    frames = scene_sequence(8, 3, width=320, height=240, floor='random')
+    base = PlaneNodeConfig()
+    pipeline = PlanePipeline(replace(base, verification=replace(base.verification,
+                                                                challenge_period=1)))
+    results = [pipeline.process(f.left, f.right, i * PERIOD_NS) for i, f in enumerate(frames)]
+    assert all(r.ok and plane_error_px(f, r.homography) < 0.5 for f, r in zip(frames, results))
+    assert sum(r.timings_ms['challenge'] > 0.0 for r in results) >= 6  # challenged throughout
+    assert [r.warm_start for r in results[1:]] == ['prediction'] * 7
+    assert all(r.lock_lost is None for r in results[1:])
 
 
 # A gate low enough that a plane 2 px off the truth still passes (score 0.31 against 0.36
