@@ -134,6 +134,7 @@ class VerificationSettings(_Section):
     coarse_width_px: int = 320
     max_ground_roll_deg: float = 10.0
     prior_slope_margin: float = 0.5
+    max_near_obstacle: float = 0.5
     covisible: bool = True
 
 

@@ -183,6 +183,14 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               'below 0.021 px per row). Narrow the prior to make it bite; no upper bound; 100 is '
               'off.',
               0.0, 100.0),
+    ParamSpec('verification.max_near_obstacle', 0.5, 'float',
+              "Ground mode, new planes only (a search's winner, a challenger; never a held "
+              "lock's warm plane): the largest share of the measured pixels (plane or "
+              "obstacle) in the bottom third of the view (of features.roi) that the plane's own "
+              'parallax mask may mark obstacle: under a plane through distant structure the '
+              'near ground shows parallax. Decides only where at least 2 % of that band is '
+              'measured; 1 switches the check off.',
+              0.0, 1.0),
     ParamSpec('verification.covisible', True, 'bool',
               'Ground mode: divide the scores by the textured pixels that the plane maps '
               'inside the right image (both cameras see them) instead of all textured pixels: '

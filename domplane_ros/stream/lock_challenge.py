@@ -129,7 +129,8 @@ class LockChallenge:
         if best is None or verdict is None or not trust.beats(verdict, lock):
             return None
         done = self._work().finished(step, problem, feats, size, best, verdict)
-        refused = trust.ground_refusal(done[0].homography, *size, done[1].verification)
+        refused = (trust.ground_refusal(done[0].homography, *size, done[1].verification)
+                   or trust.near_field_refusal(done[0].homography, config.features.roi))
         if refused:
             step.refusals.append(challenge_refused(refused))
             return None

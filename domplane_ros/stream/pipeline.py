@@ -104,7 +104,8 @@ class PlanePipeline:
         self._searcher = PlaneSearch(lambda: self.config, lambda: self._trust, self._checks,
                                      self.counts, lambda *args: self._warm.estimate(*args))
         self._tracker = FrameTracker()
-        self._trust = TrustGate(self.config.verification, prior=self.config.prior)
+        self._trust = TrustGate(self.config.verification, prior=self.config.prior,
+                                mask=self.config.mask)
         self._warm = WarmFit(lambda: self.config, lambda: self._trust, self._work)
         self._challenge = LockChallenge(lambda: self.config, lambda: self._trust, self._work,
                                         self._checks, self._searcher.candidates)
@@ -139,10 +140,11 @@ class PlanePipeline:
             self._checks.clear()
             self._searcher.prior_changed()
         if config.verification != self.config.verification:
-            trust = TrustGate(config.verification, prior=config.prior)
+            trust = TrustGate(config.verification, prior=config.prior, mask=config.mask)
             trust.take_lock(self._trust)
             self._trust = trust
         self._trust.prior = config.prior
+        self._trust.mask = config.mask
         self.config = config
 
     def reset(self, why: str = 'the warm start was dropped (reset)') -> None:

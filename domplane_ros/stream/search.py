@@ -366,12 +366,14 @@ class PlaneSearch:
         """Return why a finished winner is not published ('' if it is).
 
         :func:`_finish_refusal`, then the gate's roll and slope of a ground plane
-        (:meth:`~domplane_ros.stream.trust.TrustGate.ground_refusal`): both only on the plane
-        about to be published, never on the pick's unfinished candidates.
+        (:meth:`~domplane_ros.stream.trust.TrustGate.ground_refusal`) and its own mask's near
+        field (:meth:`~domplane_ros.stream.trust.TrustGate.near_field_refusal`): only on the
+        plane about to be published, never on the pick's unfinished candidates.
         """
+        trust = self._trust()
         return (_finish_refusal(verdict)
-                or self._trust().ground_refusal(best.homography, *size,
-                                                verdict.verification))
+                or trust.ground_refusal(best.homography, *size, verdict.verification)
+                or trust.near_field_refusal(best.homography, self._config().features.roi))
 
     def _done(self, best: PlaneEstimate | None, verdict: Verdict | None
               ) -> tuple[PlaneEstimate, Verdict] | None:

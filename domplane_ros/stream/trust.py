@@ -46,7 +46,7 @@ from collections import deque
 import statistics
 from typing import Any, Callable, Hashable, Sequence
 
-from domplane_ros.config import PriorConfig, VerificationSettings
+from domplane_ros.config import MaskConfig, PriorConfig, VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
 from domplane_ros.core.ground_slope import (ground_roll_deg, ground_slope_range,
                                             prior_slope_bounds, swap_evidence)
@@ -56,6 +56,7 @@ from domplane_ros.core.verification import (agreement_maps, AgreementMaps, Plane
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
 from domplane_ros.stream.coarse_planes import CoarsePlanes
+from domplane_ros.stream.near_field import near_field_refusal
 from domplane_ros.stream.refusals import BOTTOM, DROP, REFERENCE
 from domplane_ros.stream.uniqueness import Judged, Pick, Uniqueness
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
@@ -182,14 +183,17 @@ class TrustGate:
         history: Frames of score history kept.
         prior: The camera set-up ranges (their focal lengths and principal point: the roll of
             a ground plane, :meth:`rolled_refusal`); None: the default prior.
+        mask: The mask's settings (a new plane's own mask, :meth:`near_field_refusal`);
+            None: the defaults.
 
     """
 
     def __init__(self, settings: VerificationSettings, history: int = 10,
-                 prior: PriorConfig | None = None) -> None:
+                 prior: PriorConfig | None = None, mask: MaskConfig | None = None) -> None:
         """Start with no lock history."""
         self.settings = settings
         self.prior = prior if prior is not None else PriorConfig()
+        self.mask = mask if mask is not None else MaskConfig()
         self._configs: dict[int, VerificationConfig] = {}
         self._coarse = CoarseAligner(CoarseConfig(width_px=settings.coarse_width_px))
         self._scores: deque[float] = deque(maxlen=history)
@@ -370,6 +374,24 @@ class TrustGate:
         return (self.rolled_refusal(homography, width, height)
                 or self.slope_refusal(homography, width, height)
                 or (self.bands_refusal(check) if check is not None else ''))
+
+    def near_field_refusal(self, homography: np.ndarray,
+                           roi: Sequence[float] | None = None) -> str:
+        """Return why a new ground plane's own mask refutes it ('' if it does not).
+
+        :func:`~domplane_ros.stream.near_field.near_field_refusal` on the pair of
+        :meth:`begin_pair` (at its working level): the bottom third of the view (of ``roi``)
+        must not be mostly obstacle. For new planes only (a search's winner, a challenger),
+        never a held lock's; never with ``verification.plane: any`` or without a pair.
+        """
+        if self.settings.plane == 'any' or self._pair is None:
+            return ''
+        if self._levels is not None:
+            left, right, level = self._levels
+        else:
+            (left, right), level = self._pair, 0
+        return near_field_refusal(left, right, float(1 << level), homography, self.mask,
+                                  self.prior, roi, self.settings.max_near_obstacle)
 
     def bands_refusal(self, check: PlaneVerification) -> str:
         """Return why a weak ground plane is refused for explaining its top best ('' if not).

@@ -51,6 +51,8 @@ def test_without_the_refusal_the_wrong_plane_is_published(monkeypatch):
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
     # Round 18's roll of a published ground plane refuses it too: off, to see this rule alone.
     monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
+    # And session 22's near-field rule (its own mask calls the near floor obstacle).
+    monkeypatch.setattr(trust_module.TrustGate, 'near_field_refusal', lambda *args: '')
     frame = _rough_frame_41(7)
     result = _cold(frame)
     assert result.ok and plane_error_px(frame, result.homography) > WRONG_PX

@@ -1,0 +1,95 @@
+"""The near field of a new ground plane: its own parallax mask must not call it obstacle.
+
+A plane through distant structure (a level plane through far buildings and cars above a
+stretch of road, found in a wide low window of a street scene) can explain the texture of
+the image as well as the road does, with a score, bands and a slope that pass every other
+check of :class:`~domplane_ros.stream.trust.TrustGate` (session 21's crop 191: 7.3 px off
+at confidence 1). What it cannot fake is the road in front of the camera: measured against
+such a plane the near road shows the parallax of something nearer than the plane, so the
+plane's own residual-parallax mask (:func:`~domplane_ros.core.mask.parallax_mask`, the mask
+the pipeline would publish beside it) marks the bottom of the view obstacle. Under the true
+ground the bottom of the view is mostly ground.
+
+:func:`near_obstacle_share` reads the mask's bottom third (of the ROI's rows, over its
+columns): the share of its measured pixels (plane or obstacle, not unknown) marked obstacle.
+:func:`near_field_refusal` refuses a plane whose share is above
+``verification.max_near_obstacle`` where at least :data:`MIN_NEAR_MEASURED` of the band is
+measured. The pipeline applies it to *new* planes only (a search's finished winner, a
+challenger about to replace the lock), never to a held lock's warm plane: an obstacle that
+comes close and fills the bottom of the view (a person in front of the robot) must not drop
+a lock that every warm check still holds.
+
+Measured in session 22 (docs/BENCHMARKS.md round 23): every correct plane about to be
+published on the tuning crops and rendered cases read a share of 0.24 or less, every wrong
+plane (> 5 px) with a measured band 0.83 or more.
+"""
+
+from __future__ import annotations
+
+from typing import Sequence
+
+from domplane_ros.config import MaskConfig, PriorConfig
+from domplane_ros.core.mask import parallax_mask
+from domplane_ros.core.pixel_decision import OBSTACLE, PLANE
+from domplane_ros.core.pyramid import level_homography
+import numpy as np
+
+# The least share of the bottom band that must be measured (plane or obstacle) for the rule
+# to decide: a band that is almost all unknown (no texture, far) says nothing.
+MIN_NEAR_MEASURED = 0.02
+
+
+def near_obstacle_share(labels: np.ndarray, roi: Sequence[float] | None = None
+                        ) -> tuple[float, float]:
+    """Return the bottom third's measured share and the obstacle share of what is measured.
+
+    Args:
+        labels: (H, W) uint8 mask labels (255 plane, 127 obstacle, 0 unknown).
+        roi: ``(x0, y0, x1, y1)`` as fractions of the image, or None for the whole image:
+            the band is the lowest third of its rows, over its columns.
+
+    Returns:
+        ``(measured, obstacle)``: the band's pixels marked plane or obstacle over all its
+        pixels, and those marked obstacle over those measured (0 where none is).
+
+    """
+    height, width = labels.shape
+    x0, y0, x1, y1 = (0.0, 0.0, 1.0, 1.0) if roi is None else roi
+    top, bottom = int(round(y0 * height)), int(round(y1 * height))
+    band = labels[bottom - max(1, (bottom - top) // 3):bottom,
+                  int(round(x0 * width)):int(round(x1 * width))]
+    if band.size == 0:
+        return 0.0, 0.0
+    plane = int(np.count_nonzero(band == PLANE))
+    obstacle = int(np.count_nonzero(band == OBSTACLE))
+    measured = plane + obstacle
+    return measured / band.size, (obstacle / measured if measured else 0.0)
+
+
+def near_field_refusal(left: np.ndarray, right: np.ndarray, scale: float,
+                       homography: np.ndarray, mask: MaskConfig, prior: PriorConfig,
+                       roi: Sequence[float] | None, max_share: float) -> str:
+    """Return why a new ground plane is refused for its near field ('' if it is not).
+
+    Args:
+        left: (h, w) uint8 left image at the working level.
+        right: (h', w') uint8 right image at the working level.
+        scale: Full-resolution pixels per working pixel.
+        homography: (3, 3) the plane's homography in full pixels.
+        mask: The mask's settings (the mask the pipeline would publish).
+        prior: The camera set-up ranges (the mask's plane at infinity).
+        roi: The features' ROI (fractions), or None.
+        max_share: ``verification.max_near_obstacle``; 1 or more: off.
+
+    """
+    if max_share >= 1.0:
+        return ''
+    labels = parallax_mask(left, right, level_homography(homography, scale), mask,
+                           tuple(f / scale for f in prior.focal_px),
+                           tuple(c / scale for c in prior.principal_point_px)).labels
+    measured, share = near_obstacle_share(labels, roi)
+    if measured < MIN_NEAR_MEASURED or share <= max_share:
+        return ''
+    return (f'not the ground: its own mask marks {100 * share:.0f} % of the measured bottom '
+            f'of the view obstacle (> verification.max_near_obstacle {max_share:g}); a plane '
+            'through distant structure above the ground?')
