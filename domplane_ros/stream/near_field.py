@@ -20,8 +20,10 @@ comes close and fills the bottom of the view (a person in front of the robot) mu
 a lock that every warm check still holds.
 
 Measured in session 22 (docs/BENCHMARKS.md round 23): every correct plane about to be
-published on the tuning crops and rendered cases read a share of 0.24 or less, every wrong
-plane (> 5 px) with a measured band 0.83 or more.
+published read a share of 0.24 or less on the tuning crops and 0.34 or less on the rendered
+cases, every wrong plane (> 5 px) with a measured band 0.83 or more. Its limit (review of the
+same session): an obstacle that truly fills most of the near field reads the same, so the
+true ground is refused there until the view changes.
 """
 
 from __future__ import annotations
