@@ -12,10 +12,11 @@ from dataclasses import replace
 import functools
 
 import cv2
-from domplane_ros.config import FeatureConfig, PlaneNodeConfig
+from domplane_ros.config import FeatureConfig, MaskConfig, PlaneNodeConfig, PriorConfig
 from domplane_ros.core.features import corners_in_region, detect_corners, Features
 from domplane_ros.core.lines import detect_lines
-from domplane_ros.core.pyramid import detector_block, WorkingImage
+from domplane_ros.core.mask import parallax_mask, ParallaxMask
+from domplane_ros.core.pyramid import detector_block, level_homography, WorkingImage
 from domplane_ros.stream.motion import enough_carried
 import numpy as np
 
@@ -100,3 +101,15 @@ def full_mask(image: WorkingImage, mask: np.ndarray) -> np.ndarray:
         return mask
     height, width = image.full.shape
     return cv2.resize(mask, (width, height), interpolation=cv2.INTER_NEAREST)
+
+
+def level_mask(left: np.ndarray, right: np.ndarray, scale: float, homography: np.ndarray,
+               mask: MaskConfig, prior: PriorConfig) -> ParallaxMask:
+    """Return the parallax mask of a plane on working-level images (``scale`` full pixels each).
+
+    The homography is in full pixels; it and the prior's focal range and principal point are
+    brought to the working level, as the published mask and the near-field rule need.
+    """
+    return parallax_mask(left, right, level_homography(homography, scale), mask,
+                         tuple(f / scale for f in prior.focal_px),
+                         tuple(c / scale for c in prior.principal_point_px))

@@ -31,9 +31,8 @@ from __future__ import annotations
 from typing import Sequence
 
 from domplane_ros.config import MaskConfig, PriorConfig
-from domplane_ros.core.mask import parallax_mask
 from domplane_ros.core.pixel_decision import OBSTACLE, PLANE
-from domplane_ros.core.pyramid import level_homography
+from domplane_ros.stream.detection import level_mask
 import numpy as np
 
 # The least share of the bottom band that must be measured (plane or obstacle) for the rule
@@ -86,9 +85,7 @@ def near_field_refusal(left: np.ndarray, right: np.ndarray, scale: float,
     """
     if max_share >= 1.0:
         return ''
-    labels = parallax_mask(left, right, level_homography(homography, scale), mask,
-                           tuple(f / scale for f in prior.focal_px),
-                           tuple(c / scale for c in prior.principal_point_px)).labels
+    labels = level_mask(left, right, scale, homography, mask, prior).labels
     measured, share = near_obstacle_share(labels, roi)
     if measured < MIN_NEAR_MEASURED or share <= max_share:
         return ''

@@ -17,14 +17,13 @@ from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.estimator import can_widen, TwoStep
 from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.image import check_gray
-from domplane_ros.core.mask import parallax_mask
-from domplane_ros.core.pyramid import level_homography, WorkingImage
+from domplane_ros.core.pyramid import WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.verification import REASON_LOW_SUPPORT
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC
 from domplane_ros.stream.detection import (carried_features, detect_features, full_mask,
-                                           level_features)
+                                           level_features, level_mask)
 from domplane_ros.stream.frame import debug_overlay, FrameResult, PairStep, stage_timings_ms
 from domplane_ros.stream.health import InputCounts, PairChecks, texture_note
 from domplane_ros.stream.lock_challenge import LockChallenge
@@ -275,11 +274,9 @@ class PlanePipeline:
         parallax = None
         if step.accepted:
             h = estimate.homography
-            prior = self.config.prior
             scale = left.scale
-            out = parallax_mask(left.image, right.image, level_homography(h, scale),
-                                self.config.mask, tuple(f / scale for f in prior.focal_px),
-                                tuple(c / scale for c in prior.principal_point_px))
+            out = level_mask(left.image, right.image, scale, h, self.config.mask,
+                             self.config.prior)
             mask, parallax = full_mask(left, out.labels), out.parallax
             if scale != 1.0:
                 # Working-level pixels to full-resolution pixels (-1: not measured).
