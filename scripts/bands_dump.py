@@ -21,6 +21,7 @@ from domplane_ros.stream.pipeline import PlanePipeline
 import numpy as np
 
 LOG: list[dict] = []
+ORIGINAL_NEAR_FIELD = trust_module.near_field_refusal
 STATE: dict = {'case': '', 'seed': None, 'config': '', 'errors': None, 'frame_index': None}
 ORIGINAL_GROUND_REFUSAL = trust_module.TrustGate.ground_refusal
 ORIGINAL_PROCESS = PlanePipeline.process
@@ -33,6 +34,40 @@ def _ground_refusal(self, homography, width, height, check=None):
         entry.update(score=check.score, confidence=check.confidence,
                      top=check.top_score, middle=check.middle_score,
                      bottom=check.bottom_score, accepted=check.accepted)
+    LOG.append(entry)
+    return refusal
+
+
+def _near_shares(labels, roi):
+    """Return the near band's figures: third, its lower half, and its columns' lowest label."""
+    from domplane_ros.core.pixel_decision import OBSTACLE, PLANE
+    from domplane_ros.stream.near_field import near_obstacle_share
+    height, width = labels.shape
+    x0, y0, x1, y1 = (0.0, 0.0, 1.0, 1.0) if roi is None else roi
+    top, bottom = int(round(y0 * height)), int(round(y1 * height))
+    band = labels[bottom - max(1, (bottom - top) // 3):bottom,
+                  int(round(x0 * width)):int(round(x1 * width))]
+    lower = band[band.shape[0] // 2:]
+    measured = (band == PLANE) | (band == OBSTACLE)
+    rows = np.arange(band.shape[0])[:, None]
+    lowest = np.where(measured, rows, -1).max(axis=0)
+    seen = lowest >= 0
+    low_labels = band[lowest[seen], np.flatnonzero(seen)]
+    third = near_obstacle_share(labels, roi)
+    low_m = np.count_nonzero((lower == PLANE) | (lower == OBSTACLE))
+    return {'third_measured': third[0], 'third_share': third[1],
+            'lower_measured': low_m / max(1, lower.size),
+            'lower_share': (np.count_nonzero(lower == OBSTACLE) / low_m) if low_m else 0.0,
+            'columns_seen': float(np.mean(seen)) if seen.size else 0.0,
+            'columns_share': float(np.mean(low_labels == OBSTACLE)) if low_labels.size else 0.0}
+
+
+def _near_field(left, right, scale, homography, mask, prior, roi, max_share):
+    from domplane_ros.stream.detection import level_mask
+    refusal = ORIGINAL_NEAR_FIELD(left, right, scale, homography, mask, prior, roi, max_share)
+    labels = level_mask(left, right, scale, homography, mask, prior).labels
+    entry = {'kind': 'near', 'refusal': refusal, 'h': np.asarray(homography, float).copy()}
+    entry.update(_near_shares(labels, roi))
     LOG.append(entry)
     return refusal
 
@@ -132,6 +167,8 @@ def _trust(argv: list[str]) -> int:
     tool.random_scene = track_seeds(tool.random_scene)
     tool.cut_sequence = sequence(tool.cut_sequence)
     tool.scene_sequence = sequence(tool.scene_sequence)
+    tool.ahead_scene = track_seeds(tool.ahead_scene)
+    tool.approach_sequence = sequence(tool.approach_sequence)
     tool.progress = progress
     tool._ours_single = ours_single
     PlanePipeline.process = process
@@ -141,6 +178,7 @@ def _trust(argv: list[str]) -> int:
 if __name__ == '__main__':
     OUT = open(sys.argv[1], 'w')
     trust_module.TrustGate.ground_refusal = _ground_refusal
+    trust_module.near_field_refusal = _near_field
     if sys.argv[2] == 'real_rigs':
         PlanePipeline.process = _process
         code = _real_rigs(sys.argv[3:])

@@ -286,3 +286,74 @@ def _texture_pose(origin: np.ndarray, heading0_deg: float, x: float, z: float,
     return HeadPose(float(origin[0] + x * math.cos(h0) + z * math.sin(h0)),
                     float(origin[1] - x * math.sin(h0) + z * math.cos(h0)),
                     heading0_deg + yaw_deg)
+
+
+# Where the base of the box of :func:`ahead_scene` lies: a fraction of the image height,
+# drawn in this range (the bottom third of the view; the lower, the closer the box).
+AHEAD_BASE_ROWS = (0.8, 0.97)
+
+
+def _base_distance(setup: CameraSetup, row_fraction: float) -> float:
+    """Return the floor distance (camera height = 1) seen at a row of the image's centre."""
+    below = math.radians(setup.tilt_deg) + math.atan(
+        (row_fraction - 0.5) * setup.height / setup.focal_px)
+    return 1.0 / math.tan(below)
+
+
+def ahead_scene(seed: int, width: int = 640, height: int = 480, remaining: float = 0.0,
+                base_row: float | None = None) -> StereoFrame:
+    """Render a wide box standing right in front of the head, filling most of the near field.
+
+    The set-up and floor are drawn as in :func:`random_scene` (within the default prior); one
+    box, 50-90 % of the view wide, 0.3-0.9 camera heights high, stands on the floor with its
+    front face where the image centre's column sees the floor at ``base_row`` (drawn in
+    :data:`AHEAD_BASE_ROWS`), so its face and top fill a large part of the bottom third of
+    the view (20-45 % on tuning seeds 0-5) above a strip of floor. The obstacle in front of a robot that has to stop; ``remaining``
+    moves the head back by that distance (camera heights) along the floor, box and texture
+    fixed in the world: the frames of an approach (:func:`approach_sequence`).
+
+    Args:
+        seed: Seed of every random choice.
+        width: Image width in pixels.
+        height: Image height in pixels.
+        remaining: Distance still to go to the final pose (camera height = 1, >= 0).
+        base_row: Row of the box's base at the final pose, a fraction of the image height
+            (None: drawn).
+
+    Returns:
+        The rendered :class:`StereoFrame`.
+
+    """
+    rng = np.random.default_rng((int(seed), 9191))
+    setup = random_setup(rng, width, height)
+    floor = FLOOR_KINDS[int(rng.integers(len(FLOOR_KINDS)))]
+    background = BACKGROUNDS[int(rng.integers(len(BACKGROUNDS)))]
+    row = float(rng.uniform(*AHEAD_BASE_ROWS))
+    distance = _base_distance(setup, row if base_row is None else base_row)
+    box_width = float(rng.uniform(0.5, 0.9)) * setup.width / setup.focal_px * distance
+    depth = float(rng.uniform(0.4, 1.0))
+    box = Box(x=float(rng.uniform(-0.2, 0.2)) * box_width,
+              z=distance + 0.5 * depth + float(remaining), width=box_width, depth=depth,
+              height=float(rng.uniform(0.3, 0.9)), yaw_deg=float(rng.uniform(-10.0, 10.0)))
+    pose = HeadPose(float(rng.uniform(0, 100)), float(rng.uniform(0, 100)) - float(remaining),
+                    0.0)
+    return render_stereo(setup, [box], floor=floor, seed=int(seed), head_pose=pose,
+                         background=background, wall_distance=float(rng.uniform(8, 20)),
+                         noise_seed=int(seed) * 100003 + int(round(1000 * remaining)))
+
+
+def approach_sequence(n_frames: int, seed: int, travel: float = 2.0,
+                      width: int = 640, height: int = 480) -> list[StereoFrame]:
+    """Render a head driving straight at the box of :func:`ahead_scene` over ``travel``.
+
+    Frame ``i`` is :func:`ahead_scene` with ``remaining = travel (1 - i / (n_frames - 1))``:
+    the box's base moves from far up the view down to the bottom third of the last frame.
+
+    Raises:
+        ValueError: If ``n_frames < 2`` or ``travel`` is negative.
+
+    """
+    if n_frames < 2 or travel < 0:
+        raise ValueError(f'need n_frames >= 2 and travel >= 0, got {n_frames}, {travel}')
+    return [ahead_scene(seed, width, height, travel * (1.0 - i / (n_frames - 1)))
+            for i in range(n_frames)]

@@ -27,6 +27,12 @@ OpenCV ORB + MAGSAC++ runs on the same pairs in the same run:
   :func:`~domplane_ros.sim.generators.scene_sequence`, one pipeline): pairs 1-15 count, the
   warm pairs, so a lock that drifts off the floor pair by pair shows as pairs published
   1-5 px or > 5 px off; the worst error published is in the re-lock column's place;
+* ``ahead``: a wide box right in front of the head
+  (:func:`~domplane_ros.sim.generators.ahead_scene`: its base in the bottom fifth of the
+  view, its face and top filling a large part of the near field), cold start as ``cold``:
+  the obstacle a robot must see;
+* ``approach``: a head driving straight at such a box (16 pairs, 1.5 camera heights,
+  :func:`~domplane_ros.sim.generators.approach_sequence`, one pipeline): every pair counts;
 * ``tiles_faint_*``: weakly textured tiled floors of three tile sizes
   (:data:`~domplane_ros.sim.textures.FAINT_TILE_KINDS`), one per seed in turn, cold start as
   ``cold`` with ``features.kind: both`` (corners and line segments), the default otherwise.
@@ -48,7 +54,8 @@ import time
 from typing import Callable, Sequence
 
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
-from domplane_ros.sim.generators import random_scene, scene_sequence
+from domplane_ros.sim.generators import (ahead_scene, approach_sequence, random_scene,
+                                         scene_sequence)
 from domplane_ros.sim.model import StereoFrame
 from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
                                    random_rig_error, rough_left_rig, rough_rig, swapped)
@@ -63,6 +70,11 @@ WRONG_PX = 5.0
 CUT_BEFORE = 8
 CUT_AFTER = 8
 DRIFT_FRAMES = 16
+APPROACH_FRAMES = 16
+# Every case, in the order run (--cases picks some); tiles_faint runs one row per tile size.
+CASES = ('cold', 'rough', 'rough_left', 'swapped', 'lighting', 'ahead', 'floors',
+         'floors_rough', 'cuts', 'drift', 'approach', 'tiles_faint')
+APPROACH_TRAVEL = 1.5
 PERIOD_NS = 33_333_333
 
 
@@ -124,7 +136,8 @@ def _orb_single(frame: StereoFrame) -> tuple[float | None, float]:
     return plane_error_px(frame, run.homography), run.time_ms
 
 
-def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
+def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool,
+                  wanted: Callable[[str], bool] = lambda case: True
                   ) -> dict[tuple[str, str], Tally]:
     makers: dict[str, Callable[[int], StereoFrame]] = {
         'cold': random_scene,
@@ -135,6 +148,7 @@ def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
         'swapped': lambda s: swapped(random_scene(s)),
         'lighting': lambda s: camera_response(random_scene(s, gain=None, offset=None),
                                               np.random.default_rng((s, 555))),
+        'ahead': ahead_scene,
         'floors': lambda s: random_scene(s, floor=SIZED_FLOOR_KINDS[s % len(SIZED_FLOOR_KINDS)]),
         'floors_rough': lambda s: rough_rig(
             random_scene(s, floor=SIZED_FLOOR_KINDS[s % len(SIZED_FLOOR_KINDS)]),
@@ -142,6 +156,8 @@ def _single_cases(seeds: Sequence[int], config: PlaneNodeConfig, orb: bool
     }
     tallies: dict[tuple[str, str], Tally] = {}
     for case, make in makers.items():
+        if not wanted(case):
+            continue
         for seed in progress(seeds, case):
             frame = make(seed)
             error, ms = _ours_single(frame, config)
@@ -205,6 +221,21 @@ def _drift_case(seeds: Sequence[int], config: PlaneNodeConfig,
     return tally
 
 
+def _approach_case(seeds: Sequence[int], config: PlaneNodeConfig,
+                   n_frames: int = APPROACH_FRAMES) -> Tally:
+    """Count every pair of each approach (:func:`approach_sequence`, one pipeline)."""
+    tally = Tally()
+    for seed in progress(seeds, 'approach'):
+        pipeline = PlanePipeline(config)
+        frames = approach_sequence(n_frames, seed=seed, travel=APPROACH_TRAVEL)
+        for index, frame in enumerate(frames):
+            start = time.perf_counter()
+            result = pipeline.process(frame.left, frame.right, index * PERIOD_NS)
+            elapsed = 1e3 * (time.perf_counter() - start)
+            tally.add(plane_error_px(frame, result.homography) if result.ok else None, elapsed)
+    return tally
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the trust evaluation and print its table; return the exit code."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
@@ -216,17 +247,27 @@ def main(argv: Sequence[str] | None = None) -> int:
                         'range, kept for a closing report')
     parser.add_argument('--no-orb', action='store_true', help='skip the ORB + MAGSAC baseline')
     parser.add_argument('--out', type=Path, default=None, help='write summary.md here too')
+    parser.add_argument('--cases', default='',
+                        help=f'comma list of the cases to run (default: all of {CASES})')
     args = parser.parse_args(argv)
+    chosen = {c.strip() for c in args.cases.split(',') if c.strip()} or set(CASES)
+    if chosen - set(CASES):
+        parser.error(f'unknown cases {sorted(chosen - set(CASES))}; choose from {CASES}')
     first = 1000 if args.held_out else 0
     if args.first_seed is not None:
         first = args.first_seed
     seeds = list(range(first, first + args.pairs))
     config = PlaneNodeConfig()
     with one_core():
-        tallies = _single_cases(seeds, one_shot_search(config), not args.no_orb)
-        tallies[('cuts', 'ours')] = _cut_case(seeds[:max(1, args.pairs // 4)], config)
-        tallies[('drift', 'ours')] = _drift_case(seeds[:max(1, args.pairs // 4)], config)
-        tallies.update(_faint_tile_cases(seeds, one_shot_search(config), not args.no_orb))
+        tallies = _single_cases(seeds, one_shot_search(config), not args.no_orb,
+                                chosen.__contains__)
+        sequences = seeds[:max(1, args.pairs // 4)]
+        for case, run in (('cuts', _cut_case), ('drift', _drift_case),
+                          ('approach', _approach_case)):
+            if case in chosen:
+                tallies[(case, 'ours')] = run(sequences, config)
+        if 'tiles_faint' in chosen:
+            tallies.update(_faint_tile_cases(seeds, one_shot_search(config), not args.no_orb))
     kind = 'tuning' if first < 1000 else 'held out'
     lines = [f'machine: {machine_name()}', f'seeds {seeds[0]}..{seeds[-1]} ({kind}); '
              'prior: the documented default; correct < 1 px, wrong > 5 px',

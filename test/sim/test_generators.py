@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from domplane_ros.sim.generators import random_scene, scene_sequence, SETUP_RANGES
+from domplane_ros.sim.generators import (AHEAD_BASE_ROWS, ahead_scene, approach_sequence,
+                                         random_scene, scene_sequence, SETUP_RANGES)
 import numpy as np
 import pytest
 
@@ -49,3 +50,34 @@ def test_sequence_moves_the_head_and_keeps_the_model():
 def test_empty_sequence_raises_value_error():
     with pytest.raises(ValueError, match='n_frames'):
         scene_sequence(0, seed=0)
+
+
+def _near_band(mask: np.ndarray) -> np.ndarray:
+    return mask[mask.shape[0] - mask.shape[0] // 3:]
+
+
+def test_the_box_ahead_fills_the_near_field_above_a_strip_of_floor():
+    for seed in range(4):
+        frame = ahead_scene(seed, width=320, height=240)
+        assert len(frame.boxes) == 1
+        for name, (low, high) in SETUP_RANGES.items():
+            assert low <= getattr(frame.setup, name) <= high
+        # A large part of the view's bottom third is the box, and the floor is seen below it.
+        assert _near_band(frame.obstacle_left).mean() > 0.15
+        column = frame.setup.width // 2
+        rows = np.flatnonzero(frame.obstacle_left[:, column])
+        assert rows.size and rows.max() < AHEAD_BASE_ROWS[1] * frame.setup.height + 2
+        assert frame.plane_left[rows.max() + 2:, column].all()
+
+
+def test_an_approach_brings_the_box_down_the_view_with_the_truth_fixed():
+    frames = approach_sequence(3, seed=2, travel=1.0, width=320, height=240)
+    lowest = [np.flatnonzero(f.obstacle_left.any(axis=1)).max() for f in frames]
+    assert lowest[0] < lowest[1] < lowest[2]
+    assert _near_band(frames[0].obstacle_left).mean() < _near_band(frames[2].obstacle_left).mean()
+    for frame in frames:
+        np.testing.assert_allclose(frame.homography, frames[0].homography)
+    last = ahead_scene(2, width=320, height=240)
+    np.testing.assert_array_equal(frames[-1].obstacle_left, last.obstacle_left)
+    with pytest.raises(ValueError, match='n_frames'):
+        approach_sequence(1, seed=0)
