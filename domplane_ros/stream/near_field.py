@@ -57,6 +57,16 @@ MIN_NEAR_MEASURED = 0.02
 MAX_UNGROUNDED_COLUMNS = 0.3
 
 
+# A plane whose disparity shrinks toward the image bottom is reported as the floor of swapped
+# cameras only where its swapped reading (the right image as the left, the inverse
+# homography) marks at least this share of the bottom third plane in its own mask
+# (:func:`swapped_ground_share`). Measured (docs/BENCHMARKS.md round 24): the floors of
+# swapped cameras (evaluate_trust swapped, tuning seeds 0-12) 0.49-0.90; the faces of wide
+# boxes in front of a correctly ordered head (the ``ahead`` case) 0.0: read swapped they lie
+# beyond infinity, so every pixel of their mask is unknown.
+MIN_SWAPPED_GROUND = 0.1
+
+
 def _band(labels: np.ndarray, roi: Sequence[float] | None) -> np.ndarray:
     """Return the bottom third of the ROI's rows of ``labels``, over its columns."""
     height, width = labels.shape
@@ -110,6 +120,36 @@ def ground_below_share(labels: np.ndarray, roi: Sequence[float] | None = None) -
     lowest = band.shape[0] - 1 - np.argmax(measured[::-1], axis=0)
     columns = np.flatnonzero(seen)
     return float(np.mean(band[lowest[columns], columns] == OBSTACLE))
+
+
+def swapped_ground_share(left: np.ndarray, right: np.ndarray, scale: float,
+                         homography: np.ndarray, mask: MaskConfig, prior: PriorConfig,
+                         roi: Sequence[float] | None) -> float:
+    """Return the share of the bottom third that a plane's swapped reading marks plane.
+
+    The plane read as the floor of swapped cameras: the right image as the left, the
+    inverse homography, its own parallax mask (as :func:`near_field_refusal`'s). The floor of
+    swapped cameras is the ground of that reading and fills its near field; a surface facing
+    a correctly ordered head (a wall, an obstacle's face close ahead: its disparity also
+    shrinks toward the image bottom) lies beyond infinity in it and is unknown throughout.
+
+    Args:
+        left: (h, w) uint8 left image at the working level (as given).
+        right: (h', w') uint8 right image at the working level (as given).
+        scale: Full-resolution pixels per working pixel.
+        homography: (3, 3) the plane's left-to-right homography in full pixels.
+        mask: The mask's settings.
+        prior: The camera set-up ranges.
+        roi: The features' ROI (fractions), or None.
+
+    Returns:
+        The band's pixels marked plane over all its pixels, [0, 1].
+
+    """
+    inverse = np.linalg.inv(np.asarray(homography, np.float64))
+    inverse /= inverse[2, 2]
+    band = _band(level_mask(right, left, scale, inverse, mask, prior).labels, roi)
+    return float(np.count_nonzero(band == PLANE)) / band.size if band.size else 0.0
 
 
 def near_field_refusal(left: np.ndarray, right: np.ndarray, scale: float,

@@ -56,7 +56,8 @@ from domplane_ros.core.verification import (agreement_maps, AgreementMaps, Plane
                                             VerificationConfig, verify_plane, working_pair,
                                             WorkingPair)
 from domplane_ros.stream.coarse_planes import CoarsePlanes
-from domplane_ros.stream.near_field import near_field_refusal
+from domplane_ros.stream.near_field import (MIN_SWAPPED_GROUND, near_field_refusal,
+                                            swapped_ground_share)
 from domplane_ros.stream.refusals import BOTTOM, DROP, REFERENCE
 from domplane_ros.stream.uniqueness import Judged, Pick, Uniqueness
 from domplane_ros.stream.verdict import CHALLENGE_MARGIN, Verdict
@@ -204,7 +205,8 @@ class TrustGate:
         self._levels: tuple[np.ndarray, np.ndarray, int] | None = None
         self._memo: dict[Any, np.ndarray] = {}
         self._verified: dict[tuple[bytes, Any, int], PlaneVerification] = {}
-        self._uniqueness = Uniqueness(self._coarse, self._per_pair, self._maps)
+        self._uniqueness = Uniqueness(self._coarse, self._per_pair, self._maps,
+                                      self.swap_seen)
         # The pair's photometric planes (coarse candidates, refinements, siblings, polish),
         # on this gate's aligner, memo and verification.
         self.planes = CoarsePlanes(settings, self._coarse, self._per_pair, self._maps,
@@ -392,6 +394,28 @@ class TrustGate:
             (left, right), level = self._pair, 0
         return near_field_refusal(left, right, float(1 << level), homography, self.mask,
                                   self.prior, roi, self.settings.max_near_obstacle)
+
+    def swap_seen(self, homography: np.ndarray, roi: Sequence[float] | None = None) -> bool:
+        """Return whether a plane that looks swapped is the floor of swapped cameras.
+
+        Its swapped reading's own mask must mark at least :data:`MIN_SWAPPED_GROUND` of the
+        bottom third (of ``roi``) plane
+        (:func:`~domplane_ros.stream.near_field.swapped_ground_share`, on the pair of
+        :meth:`begin_pair` at its working level, once per plane and pair). A surface facing
+        the head fills the view with the same disparity slope but is no ground read either
+        way: neither a swap report nor a rival. True without a pair (no evidence against it).
+        """
+        if self._pair is None:
+            return True
+        if self._levels is not None:
+            left, right, level = self._levels
+        else:
+            (left, right), level = self._pair, 0
+        key = ('swapped ground', np.asarray(homography, np.float64).tobytes(),
+               None if roi is None else tuple(roi))
+        share = float(self._per_pair(*self._pair, key, lambda: np.array(swapped_ground_share(
+            left, right, float(1 << level), homography, self.mask, self.prior, roi))))
+        return share >= MIN_SWAPPED_GROUND
 
     def bands_refusal(self, check: PlaneVerification) -> str:
         """Return why a weak ground plane is refused for explaining its top best ('' if not).
@@ -616,7 +640,8 @@ class TrustGate:
                            self.judge(left, right, estimate.homography, roi)))
         verified = [item for item in judged if item[2].accepted]
         reasons = [verdict for _, _, verdict in judged if not verdict.accepted]
-        swapped = [v for v in reasons if v.swapped and v.verification.accepted]
+        swapped = [(h, v) for _, h, v in judged
+                   if not v.accepted and v.swapped and v.verification.accepted]
         if verified:
             rival_planes = rivals() if callable(rivals) else rivals
             judged += [(None, rival, self.judge(left, right, rival, roi))
@@ -626,8 +651,18 @@ class TrustGate:
             return pick(left, right, judged, verified, roi)
         if swapped:
             # The image is explained better by a plane of swapped cameras: what passes the
-            # ground check is a look-alike (measured: a checker floor one period off).
-            return None, None, max(swapped, key=lambda v: v.score).reason
+            # ground check is a look-alike (measured: a checker floor one period off). Unless
+            # no such plane is the floor of swapped cameras read so (swap_seen): a surface
+            # facing the head, a wall or an obstacle's face close ahead, fills the view.
+            swapped.sort(key=lambda item: -item[1].score)
+            seen = next((v for h, v in swapped if self.swap_seen(h, roi)), None)
+            if seen is not None:
+                return None, None, seen.reason
+            return None, None, (
+                'not the ground: a surface facing the head fills the view (its disparity '
+                'shrinks toward the image bottom, score '
+                f'{swapped[0][1].score:.2f}, but with left and right exchanged its own mask '
+                'sees no ground either); a wall or an obstacle close ahead?')
         if not reasons:
             return None, None, ''
         closest = max(reasons, key=lambda v: v.score)

@@ -75,6 +75,9 @@ PerPair = Callable[[np.ndarray, np.ndarray, Hashable, Callable[[], np.ndarray]],
 # verification settings (on the pair's once-shrunk images between begin_pair and end_pair):
 # (left, right, homography, roi) -> AgreementMaps.
 Maps = Callable[[np.ndarray, np.ndarray, np.ndarray, Sequence[float] | None], AgreementMaps]
+# The gate's test that a plane which looks swapped is the floor of swapped cameras read so
+# (TrustGate.swap_seen): (homography, roi) -> bool.
+SwapSeen = Callable[[np.ndarray, Sequence[float] | None], bool]
 
 
 class Uniqueness:
@@ -87,11 +90,13 @@ class Uniqueness:
 
     """
 
-    def __init__(self, coarse: CoarseAligner, per_pair: PerPair, maps: Maps) -> None:
+    def __init__(self, coarse: CoarseAligner, per_pair: PerPair, maps: Maps,
+                 swap_seen: SwapSeen = lambda homography, roi: True) -> None:
         """Keep the gate's aligner, memo and maps; the optical flow is made when first needed."""
         self._coarse = coarse
         self._per_pair = per_pair
         self._maps = maps
+        self._swap_seen = swap_seen
         self._flow: cv2.DISOpticalFlow | None = None
 
     def ground_winner(self, left: np.ndarray, right: np.ndarray, judged: list[Judged],
@@ -112,10 +117,11 @@ class Uniqueness:
         """
         height, width = left.shape
         best, best_h, verdict = max(verified, key=lambda item: item[2].peak_score)
-        rival_scores = [(v.score, v.swapped) for _, h, v in judged
-                        if is_rival(v, h, best_h, width, height)
-                        and not self.swap_refuted(left, right, best_h, verdict, h, v)]
-        top, top_swapped = max(rival_scores, default=(0.0, False))
+        rivals = [(v.score, v.swapped, h) for _, h, v in judged
+                  if is_rival(v, h, best_h, width, height)
+                  and not self.swap_refuted(left, right, best_h, verdict, h, v)]
+        top, top_swapped, top_h = max(rivals, key=lambda item: item[:2],
+                                      default=(0.0, False, None))
         # The best plane refused only for the texture beyond it, if it outscores the winner
         # (BEYOND_RIVAL_SHARE): the search compares it with the winner once finished.
         beyond = max((v.score for _, _, v in judged if v.beyond), default=0.0)
@@ -127,10 +133,17 @@ class Uniqueness:
             if shared:
                 return None, None, shared
             return best, verdict, ''
-        kind = 'plane of swapped cameras' if top_swapped else 'distinct plane'
+        kind, hint = 'distinct plane', 'a periodic floor?'
+        if top_swapped:
+            # Named by what it is (the decision is the same): the floor of swapped cameras,
+            # or a surface facing the head that only looks swapped (TrustGate.swap_seen).
+            kind, hint = (('plane of swapped cameras', hint) if self._swap_seen(top_h, roi)
+                          else ('plane whose disparity shrinks toward the image bottom',
+                                'read with left and right exchanged it sees no ground: a '
+                                'periodic floor, or an obstacle or a wall close ahead?'))
         return None, None, (f'ambiguous: a {kind} explains the image almost as well '
                             f'(score {top:.2f} against {verdict.score:.2f} < '
-                            f'{CHALLENGE_MARGIN:g} x; a periodic floor?)')
+                            f'{CHALLENGE_MARGIN:g} x; {hint})')
 
     def shared_rival(self, left: np.ndarray, right: np.ndarray, best_h: np.ndarray,
                      verdict: Verdict, judged: list[Judged], roi: Sequence[float] | None

@@ -14,7 +14,7 @@ from dataclasses import replace
 from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
 from domplane_ros.core.pixel_decision import OBSTACLE, PLANE, UNKNOWN
 from domplane_ros.sim.generators import ahead_scene, indoor_scene, random_scene
-from domplane_ros.sim.rigs import plane_error_px
+from domplane_ros.sim.rigs import plane_error_px, swapped
 from domplane_ros.stream import near_field
 from domplane_ros.stream.near_field import (ground_below_share, MIN_NEAR_MEASURED,
                                             near_obstacle_share)
@@ -155,3 +155,34 @@ def test_a_held_lock_is_never_judged_by_its_near_field(monkeypatch):
         assert result.ok and pipeline.state == 'locked', result.reason
     fresh = PlanePipeline().process(scene.left, scene.right, 0)
     assert not fresh.ok and 'refused by the test' in fresh.reason, fresh.reason
+
+
+@pytest.mark.parametrize('seed', [0, 29])
+def test_a_box_face_filling_the_view_is_not_reported_as_swapped_cameras(seed, monkeypatch):
+    # The ``ahead`` case (tuning seeds): the face of a wide box close ahead explains more of
+    # the image than the floor, and its disparity shrinks toward the image bottom as a floor
+    # seen by swapped cameras does; it was reported as swapped cameras ("swap the image
+    # topics"). Read with left and right exchanged its own mask sees no ground (it lies beyond
+    # infinity there), while the floors of swapped cameras fill their near field.
+    scene = ahead_scene(seed)
+    config = one_shot_search(PlaneNodeConfig())
+    result = PlanePipeline(config).process(scene.left, scene.right, 0)
+    assert not result.ok and 'a surface facing the head' in result.reason, result.reason
+    assert 'swap' not in result.reason
+    # Without the test of the swapped reading the same pair says swap.
+    monkeypatch.setattr('domplane_ros.stream.trust.MIN_SWAPPED_GROUND', 0.0)
+    result = PlanePipeline(config).process(scene.left, scene.right, 0)
+    assert not result.ok and 'appear swapped' in result.reason, result.reason
+
+
+def test_the_floor_of_swapped_cameras_is_seen_read_swapped():
+    scene = swapped(random_scene(0))
+    gate = TrustGate(VerificationSettings())
+    gate.begin_pair(scene.left, scene.right)
+    assert gate.swap_seen(scene.homography)
+    # A plane of this head facing it (the fronto-parallel plane 40 px of disparity away) is
+    # not: read swapped it lies beyond infinity.
+    facing = np.array([[1.0, 0.0, -40.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+    assert not gate.swap_seen(facing)
+    gate.end_pair()
+    assert gate.swap_seen(facing)      # no pair: no evidence against a swap
