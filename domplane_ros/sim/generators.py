@@ -302,15 +302,15 @@ def _base_distance(setup: CameraSetup, row_fraction: float) -> float:
 
 def ahead_scene(seed: int, width: int = 640, height: int = 480, remaining: float = 0.0,
                 base_row: float | None = None) -> StereoFrame:
-    """Render a wide box standing right in front of the head, filling most of the near field.
+    """Render a wide box standing right in front of the head, filling much of the near field.
 
     The set-up and floor are drawn as in :func:`random_scene` (within the default prior); one
     box, 50-90 % of the view wide, 0.3-0.9 camera heights high, stands on the floor with its
     front face where the image centre's column sees the floor at ``base_row`` (drawn in
     :data:`AHEAD_BASE_ROWS`), so its face and top fill a large part of the bottom third of
-    the view (20-45 % on tuning seeds 0-5) above a strip of floor. The obstacle in front of a robot that has to stop; ``remaining``
-    moves the head back by that distance (camera heights) along the floor, box and texture
-    fixed in the world: the frames of an approach (:func:`approach_sequence`).
+    the view (20-45 % on tuning seeds 0-5) above a strip of floor: the obstacle in front of
+    a robot that has to stop. ``remaining`` moves the head back by that distance (camera
+    heights) along the floor, box and texture fixed in the world: the frames of an approach (:func:`approach_sequence`).
 
     Args:
         seed: Seed of every random choice.

@@ -14,10 +14,10 @@ ground the bottom of the view is mostly ground.
 columns): the share of its measured pixels (plane or obstacle, not unknown) marked obstacle.
 :func:`near_field_refusal` refuses a plane whose share is above
 ``verification.max_near_obstacle`` where at least :data:`MIN_NEAR_MEASURED` of the band is
-measured and no ground is seen below the obstacle (below). The pipeline applies it to *new* planes only (a search's finished winner, a
-challenger about to replace the lock), never to a held lock's warm plane: an obstacle that
-comes close and fills the bottom of the view (a person in front of the robot) must not drop
-a lock that every warm check still holds.
+measured and no ground is seen below the obstacle (below). The pipeline applies it to *new*
+planes only (a search's finished winner, a challenger about to replace the lock), never to a
+held lock's warm plane: an obstacle that comes close and fills the bottom of the view (a
+person in front of the robot) must not drop a lock that every warm check still holds.
 
 Measured in session 22 (docs/BENCHMARKS.md round 23): every correct plane about to be
 published read a share of 0.24 or less on the tuning crops and 0.34 or less on the rendered
