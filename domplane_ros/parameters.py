@@ -189,7 +189,10 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               "obstacle) in the bottom third of the view (of features.roi) that the plane's own "
               'parallax mask may mark obstacle: under a plane through distant structure the '
               'near ground shows parallax. Decides only where at least 2 % of that band is '
-              'measured; 1 switches the check off.',
+              'measured, and refuses only where no ground is seen below the obstacle (the '
+              'lowest measured pixel is obstacle in more than 30 % of the columns): an '
+              'obstacle standing on the ground has ground in front of it. 1 switches the '
+              'check off.',
               0.0, 1.0),
     ParamSpec('verification.covisible', True, 'bool',
               'Ground mode: divide the scores by the textured pixels that the plane maps '
