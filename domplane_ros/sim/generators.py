@@ -311,7 +311,7 @@ def ahead_scene(seed: int, width: int = 640, height: int = 480, remaining: float
     the view (20-45 % on tuning seeds 0-5) above a strip of floor: the obstacle in front of
     a robot that has to stop. ``remaining`` moves the head back by that distance (camera
     heights) along the floor, box and texture fixed in the world: the frames of an approach
-    (:func:`approach_sequence`).
+    (:func:`approach_sequence`; the background wall, when drawn, keeps its distance).
 
     Args:
         seed: Seed of every random choice.

@@ -135,6 +135,9 @@ MIN_REGION_FRACTION = 0.1
 # never fires; the reference does not move with it. The scene itself changes the true plane's
 # score over a lock (measured below), so the ratios are loose: they catch a lock that slid off
 # the floor, not a pixel of bias. False: the history alone, as before session 17.
+# Where a search ends on planes that look swapped, at most this many of them (the best
+# scoring) are read swapped (TrustGate.swap_seen, one mask each) to name the refusal.
+SWAP_SEEN_TRIED = 3
 LOCK_REFERENCE = True
 LOCK_REFERENCE_RATIO = 0.7
 LOCK_BOTTOM_RATIO = 0.4
@@ -395,7 +398,8 @@ class TrustGate:
         return near_field_refusal(left, right, float(1 << level), homography, self.mask,
                                   self.prior, roi, self.settings.max_near_obstacle)
 
-    def swap_seen(self, homography: np.ndarray, roi: Sequence[float] | None = None) -> bool:
+    def swap_seen(self, homography: np.ndarray, roi: Sequence[float] | None = None,
+                  pair: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
         """Return whether a plane that looks swapped is the floor of swapped cameras.
 
         Its swapped reading's own mask must mark at least :data:`MIN_SWAPPED_GROUND` of the
@@ -403,9 +407,12 @@ class TrustGate:
         (:func:`~domplane_ros.stream.near_field.swapped_ground_share`, on the pair of
         :meth:`begin_pair` at its working level, once per plane and pair). A surface facing
         the head fills the view with the same disparity slope but is no ground read either
-        way: neither a swap report nor a rival. True without a pair (no evidence against it).
+        way: it is not reported as a swap (it still counts as a rival in a pick, only named
+        otherwise). True without a pair, or when ``pair`` (the images judged) is not the pair
+        of :meth:`begin_pair` (no evidence against it).
         """
-        if self._pair is None:
+        if self._pair is None or (pair is not None and (pair[0] is not self._pair[0]
+                                                        or pair[1] is not self._pair[1])):
             return True
         if self._levels is not None:
             left, right, level = self._levels
@@ -622,7 +629,9 @@ class TrustGate:
 
         Returns:
             The best verified estimate and its verdict (None, None if none verified or it is
-            not unique) and, if none, why (the swap reason if any plane looked swapped).
+            not unique) and, if none, why (the swap reason if one of the best planes that
+            looked swapped is the floor of swapped cameras read so, :meth:`swap_seen`; a
+            surface facing the head if none is).
 
         """
         judged: list[Judged] = []
@@ -654,8 +663,10 @@ class TrustGate:
             # ground check is a look-alike (measured: a checker floor one period off). Unless
             # no such plane is the floor of swapped cameras read so (swap_seen): a surface
             # facing the head, a wall or an obstacle's face close ahead, fills the view.
+            # The best-scoring few only (SWAP_SEEN_TRIED): a mask each.
             swapped.sort(key=lambda item: -item[1].score)
-            seen = next((v for h, v in swapped if self.swap_seen(h, roi)), None)
+            seen = next((v for h, v in swapped[:SWAP_SEEN_TRIED]
+                         if self.swap_seen(h, roi, (left, right))), None)
             if seen is not None:
                 return None, None, seen.reason
             return None, None, (

@@ -76,8 +76,8 @@ PerPair = Callable[[np.ndarray, np.ndarray, Hashable, Callable[[], np.ndarray]],
 # (left, right, homography, roi) -> AgreementMaps.
 Maps = Callable[[np.ndarray, np.ndarray, np.ndarray, Sequence[float] | None], AgreementMaps]
 # The gate's test that a plane which looks swapped is the floor of swapped cameras read so
-# (TrustGate.swap_seen): (homography, roi) -> bool.
-SwapSeen = Callable[[np.ndarray, Sequence[float] | None], bool]
+# (TrustGate.swap_seen): (homography, roi, (left, right)) -> bool.
+SwapSeen = Callable[[np.ndarray, Sequence[float] | None, tuple[np.ndarray, np.ndarray]], bool]
 
 
 class Uniqueness:
@@ -91,7 +91,7 @@ class Uniqueness:
     """
 
     def __init__(self, coarse: CoarseAligner, per_pair: PerPair, maps: Maps,
-                 swap_seen: SwapSeen = lambda homography, roi: True) -> None:
+                 swap_seen: SwapSeen = lambda homography, roi, pair: True) -> None:
         """Keep the gate's aligner, memo and maps; the optical flow is made when first needed."""
         self._coarse = coarse
         self._per_pair = per_pair
@@ -137,10 +137,11 @@ class Uniqueness:
         if top_swapped:
             # Named by what it is (the decision is the same): the floor of swapped cameras,
             # or a surface facing the head that only looks swapped (TrustGate.swap_seen).
-            kind, hint = (('plane of swapped cameras', hint) if self._swap_seen(top_h, roi)
-                          else ('plane whose disparity shrinks toward the image bottom',
-                                'read with left and right exchanged it sees no ground: a '
-                                'periodic floor, or an obstacle or a wall close ahead?'))
+            seen = self._swap_seen(top_h, roi, (left, right))
+            kind, hint = (('plane of swapped cameras', hint) if seen else
+                          ('plane whose disparity shrinks toward the image bottom',
+                           'read with left and right exchanged it sees no ground: a '
+                           'periodic floor, or an obstacle or a wall close ahead?'))
         return None, None, (f'ambiguous: a {kind} explains the image almost as well '
                             f'(score {top:.2f} against {verdict.score:.2f} < '
                             f'{CHALLENGE_MARGIN:g} x; {hint})')

@@ -184,5 +184,8 @@ def test_the_floor_of_swapped_cameras_is_seen_read_swapped():
     # not: read swapped it lies beyond infinity.
     facing = np.array([[1.0, 0.0, -40.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     assert not gate.swap_seen(facing)
+    assert not gate.swap_seen(facing, pair=(scene.left, scene.right))
+    # Other images than the pair begun: no evidence.
+    assert gate.swap_seen(facing, pair=(scene.left.copy(), scene.right))
     gate.end_pair()
     assert gate.swap_seen(facing)      # no pair: no evidence against a swap
