@@ -72,9 +72,10 @@ def test_the_ground_below_is_read_at_each_columns_lowest_measured_pixel():
     assert ground_below_share(labels) == 1.0
 
 
-@pytest.mark.parametrize('seed', [7, 30])
+@pytest.mark.parametrize('seed', [7])
 def test_the_ground_in_front_of_a_wide_box_is_published(seed, monkeypatch):
-    # The ``ahead`` case of evaluate_trust (tuning seeds): a wide box in front of the head
+    # The ``ahead`` case of evaluate_trust (tuning seeds 7 and 30, one run here for the test
+    # time): a wide box in front of the head
     # fills 58-68 % of what the floor's own mask measures in the bottom third, which the rule
     # of session 22 refused; the floor is seen below the box in all but 0-12 % of the band's
     # columns.
@@ -157,9 +158,10 @@ def test_a_held_lock_is_never_judged_by_its_near_field(monkeypatch):
     assert not fresh.ok and 'refused by the test' in fresh.reason, fresh.reason
 
 
-@pytest.mark.parametrize('seed', [0, 29])
+@pytest.mark.parametrize('seed', [29])
 def test_a_box_face_filling_the_view_is_not_reported_as_swapped_cameras(seed, monkeypatch):
-    # The ``ahead`` case (tuning seeds): the face of a wide box close ahead explains more of
+    # The ``ahead`` case (tuning seeds 0 and 29, one run here for the test time): the face of
+    # a wide box close ahead explains more of
     # the image than the floor, and its disparity shrinks toward the image bottom as a floor
     # seen by swapped cameras does; it was reported as swapped cameras ("swap the image
     # topics"). Read with left and right exchanged its own mask sees no ground (it lies beyond
