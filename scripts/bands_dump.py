@@ -41,25 +41,18 @@ def _ground_refusal(self, homography, width, height, check=None):
 def _near_shares(labels, roi):
     """Return the near band's figures: third, its lower half, and its columns' lowest label."""
     from domplane_ros.core.pixel_decision import OBSTACLE, PLANE
-    from domplane_ros.stream.near_field import near_obstacle_share
-    height, width = labels.shape
-    x0, y0, x1, y1 = (0.0, 0.0, 1.0, 1.0) if roi is None else roi
-    top, bottom = int(round(y0 * height)), int(round(y1 * height))
-    band = labels[bottom - max(1, (bottom - top) // 3):bottom,
-                  int(round(x0 * width)):int(round(x1 * width))]
+    from domplane_ros.stream.near_field import (_band, ground_below_share,
+                                                near_obstacle_share)
+    band = _band(labels, roi)
     lower = band[band.shape[0] // 2:]
-    measured = (band == PLANE) | (band == OBSTACLE)
-    rows = np.arange(band.shape[0])[:, None]
-    lowest = np.where(measured, rows, -1).max(axis=0)
-    seen = lowest >= 0
-    low_labels = band[lowest[seen], np.flatnonzero(seen)]
-    third = near_obstacle_share(labels, roi)
     low_m = np.count_nonzero((lower == PLANE) | (lower == OBSTACLE))
+    third = near_obstacle_share(labels, roi)
     return {'third_measured': third[0], 'third_share': third[1],
             'lower_measured': low_m / max(1, lower.size),
             'lower_share': (np.count_nonzero(lower == OBSTACLE) / low_m) if low_m else 0.0,
-            'columns_seen': float(np.mean(seen)) if seen.size else 0.0,
-            'columns_share': float(np.mean(low_labels == OBSTACLE)) if low_labels.size else 0.0}
+            'columns_seen': float(np.mean(((band == PLANE) | (band == OBSTACLE)).any(axis=0)))
+            if band.size else 0.0,
+            'columns_share': ground_below_share(labels, roi)}
 
 
 def _near_field(left, right, scale, homography, mask, prior, roi, max_share):

@@ -71,6 +71,9 @@ import numpy as np
 # session 15) 110 of 6160 true floors lie under 0.04 and 4 under this 0.02 (least 0.016;
 # 0.007 at a corner of the prior: f 400, b/h 0.05, tilt 50 deg, vergence 4 deg).
 MIN_GROUND_SLOPE = 0.02
+# Where a search ends on planes that look swapped, at most this many of them (the best
+# scoring) are read swapped (TrustGate.swap_seen, one mask each) to name the refusal.
+SWAP_SEEN_TRIED = 3
 # A published plane must explain at least this share of the textured pixels in the lowest
 # third of the region (PlaneVerification.bottom_score): the ground seen from above fills the
 # bottom of the image. Measured on the tuning seeds 30-129 (cold, rough, swapped, faint tiles):
@@ -135,9 +138,6 @@ MIN_REGION_FRACTION = 0.1
 # never fires; the reference does not move with it. The scene itself changes the true plane's
 # score over a lock (measured below), so the ratios are loose: they catch a lock that slid off
 # the floor, not a pixel of bias. False: the history alone, as before session 17.
-# Where a search ends on planes that look swapped, at most this many of them (the best
-# scoring) are read swapped (TrustGate.swap_seen, one mask each) to name the refusal.
-SWAP_SEEN_TRIED = 3
 LOCK_REFERENCE = True
 LOCK_REFERENCE_RATIO = 0.7
 LOCK_BOTTOM_RATIO = 0.4
@@ -391,12 +391,16 @@ class TrustGate:
         """
         if self.settings.plane == 'any' or self._pair is None:
             return ''
-        if self._levels is not None:
-            left, right, level = self._levels
-        else:
-            (left, right), level = self._pair, 0
+        left, right, level = self._working_level()
         return near_field_refusal(left, right, float(1 << level), homography, self.mask,
                                   self.prior, roi, self.settings.max_near_obstacle)
+
+    def _working_level(self) -> tuple[np.ndarray, np.ndarray, int]:
+        """Return the pair of :meth:`begin_pair` at the pipeline's working level, and L."""
+        if self._levels is not None:
+            return self._levels
+        assert self._pair is not None
+        return self._pair[0], self._pair[1], 0
 
     def swap_seen(self, homography: np.ndarray, roi: Sequence[float] | None = None,
                   pair: tuple[np.ndarray, np.ndarray] | None = None) -> bool:
@@ -414,10 +418,7 @@ class TrustGate:
         if self._pair is None or (pair is not None and (pair[0] is not self._pair[0]
                                                         or pair[1] is not self._pair[1])):
             return True
-        if self._levels is not None:
-            left, right, level = self._levels
-        else:
-            (left, right), level = self._pair, 0
+        left, right, level = self._working_level()
         key = ('swapped ground', np.asarray(homography, np.float64).tobytes(),
                None if roi is None else tuple(roi))
         share = float(self._per_pair(*self._pair, key, lambda: np.array(swapped_ground_share(
