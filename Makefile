@@ -51,12 +51,19 @@ ONE_THREAD := OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 OPENCV_FOR_THREADS_NUM=1
 # several tests render is rendered once, also across the workers and the ROS run.
 RENDER_CACHE := DOMPLANE_RENDER_CACHE=$(CURDIR)/.cache/render
 
+# Byte-code is written for the test runs even where the environment says not to
+# (PYTHONDONTWRITEBYTECODE=1 on this machine): the package's modules and pytest's rewritten test
+# modules are then compiled once, not again by the ROS run (its collection 8.4 s -> 2.5 s) and
+# by every plane_node and plane_replay process the tests start. The __pycache__ folders are
+# ignored by git; `make clean` removes them.
+WRITE_BYTECODE := PYTHONDONTWRITEBYTECODE=
+
 # Both runs always run; the target fails if either failed.
 test: venv
 	status=0; \
-	$(RENDER_CACHE) $(ONE_THREAD) $(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) -n $(PYTEST_WORKERS) --dist loadfile \
+	$(WRITE_BYTECODE) $(RENDER_CACHE) $(ONE_THREAD) $(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) -n $(PYTEST_WORKERS) --dist loadfile \
 		-m 'not ros' test || status=$$?; \
-	$(RENDER_CACHE) $(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) -m ros test/ros || status=$$?; \
+	$(WRITE_BYTECODE) $(RENDER_CACHE) $(VPY) -m pytest -q --timeout=$(PYTEST_TIMEOUT_S) -m ros test/ros || status=$$?; \
 	exit $$status
 
 lint: venv
@@ -72,3 +79,4 @@ bench: venv
 clean:
 	rm -rf $(VENV) .cache domplane_ros.egg-info .pytest_cache .hypothesis demo_output \
 		bench_output eval_output soak_output
+	find domplane_ros test -name __pycache__ -type d -prune -exec rm -rf {} +

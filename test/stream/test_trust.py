@@ -133,7 +133,9 @@ def _cut_run(before, after, seed):
     return results, errors
 
 
-@pytest.mark.parametrize('seed', [0, 1, 3, 186])
+# Seeds 0 and 3 were dropped for the test run's time (10 s each): evaluate_trust's cuts (40
+# tuning seeds), the replay's and the node's cut tests assert the same.
+@pytest.mark.parametrize('seed', [1, 186])
 def test_a_cut_relocks_within_three_pairs_and_publishes_no_wrong_plane(seed):
     results, errors = _cut_run(6, 6, seed)
     after = errors[6:]
