@@ -386,3 +386,32 @@ def test_the_shrink_starts_from_the_working_level_with_the_same_images(scale: in
     with pytest.raises(ValueError, match='pyramid level'):
         verification.working_pair(left, right, config,
                                   (levels[0][:-2], levels[1], levels[2]))
+
+
+@pytest.mark.parametrize('exact', [True, False])
+def test_windows_that_mix_in_the_right_images_border_are_not_inside(monkeypatch, exact):
+    # A textured pair whose true plane maps the left image's last row half a pixel below the
+    # right image's last row: the bottom windows interpolate the border into their values.
+    # Exact coverage counts them outside (the covisible score is that of the aligned pair);
+    # the old test (the border's value -1 mixed in but the pixel not negative) kept them
+    # inside, each against the true plane (measured, the bottom fifth's covisible score:
+    # aligned 0.968, moved 0.977 exact, 0.909 with the old test).
+    monkeypatch.setattr(verification, 'EXACT_COVERAGE', exact)
+    rng = np.random.default_rng(3)
+    noise = cv2.GaussianBlur(rng.integers(0, 256, (240, 320)).astype(np.uint8), (0, 0), 1.5)
+    left = cv2.normalize(noise, None, 0, 255, cv2.NORM_MINMAX)
+    config = replace(CONFIG, working_width_px=320, covisible=True)
+    bottom = (0.0, 0.8, 1.0, 1.0)
+    aligned = verification.verify_plane(left, left, np.eye(3), config, bottom).score
+    down = _translate(0.0, 0.5)
+    right = cv2.warpPerspective(left, down, (320, 240), flags=cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REFLECT)
+    maps = verification.agreement_maps(left, right, down, config, bottom)
+    score = verification.verify_plane(left, right, down, config, bottom).score
+    last_rows = maps.inside[-(config.window_px // 2 + 1):]
+    if exact:
+        assert not last_rows.any()
+        assert abs(score - aligned) < 0.02, (score, aligned)
+    else:
+        assert last_rows.all()
+        assert score < aligned - 0.04, (score, aligned)
