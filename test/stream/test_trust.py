@@ -789,7 +789,7 @@ def test_a_stream_on_a_sized_checker_seen_by_a_rough_rig_locks_on_no_look_alike(
     # the further shifts make the pair ambiguous: nothing is published (review of session 14).
     # Every textured pixel counted, as then: co-visible (the default since session 20) the
     # stream stays on the floor (0.10 px) even without the doubt, so it cannot show the rule.
-    # Its last three pairs on a fresh pipeline show the same (the test's time: 52 s -> 6 s):
+    # Its last three pairs on a fresh pipeline show the same (the test's time: 52 s -> 12 s):
     # nothing published; without the doubt 38.7-38.9 px from the first of them.
     frames = [rough_rig(f, random_rig_error(np.random.default_rng((3, 77))))
               for f in scene_sequence(11, 3, floor='checker_32')][8:]
