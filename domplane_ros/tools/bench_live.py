@@ -355,7 +355,7 @@ def bench_breakdown(width: int, height: int, n_frames: int, seed: int) -> None:
     from domplane_ros.core import pyramid
     from domplane_ros.ros.messages import image_msg, stamped_header
     from domplane_ros.ros.wire import image_from_cdr
-    from domplane_ros.stream import health, pipeline as pipeline_module, trust
+    from domplane_ros.stream import detection, health, pipeline as pipeline_module, trust
 
     pairs = _image_messages(width, height, 'mono8', n_frames, seed)
     wire = [tuple(serialize_message(msg) for msg in pair) for pair in pairs]
@@ -368,7 +368,7 @@ def bench_breakdown(width: int, height: int, n_frames: int, seed: int) -> None:
     watch.wrap(trust, 'verify_plane', '  verifications (the shrink apart)')
     watch.wrap(PlanePipeline, '_challenge_step', '  the challenge (verifications incl.)')
     watch.wrap(PlanePipeline, '_publish', 'mask incl. upscale')
-    watch.wrap(pipeline_module, 'parallax_mask', '  mask on the working level')
+    watch.wrap(detection, 'parallax_mask', '  mask on the working level')
     watch.wrap(pipeline_module, 'full_mask', '  mask upscale to full size')
     node_pipeline = PlanePipeline(PlaneNodeConfig())
     rows: dict[str, list[float]] = {}
