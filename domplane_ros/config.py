@@ -125,7 +125,7 @@ class VerificationSettings(_Section):
 
     section: ClassVar[str] = 'verification'
 
-    min_score: float = 0.25
+    min_score: float = 0.22
     plane: str = 'ground'
     scale: float = 0.25
     drop_ratio: float = 0.5

@@ -136,7 +136,7 @@ PARAMETERS: tuple[ParamSpec, ...] = (
               '(finite, invertible: condition number at most 1e6 with pixels scaled by '
               '1/1000); empty means search the prior.', lengths=(0, 9)),
     # Verification (every plane is verified before it is published).
-    ParamSpec('verification.min_score', 0.25, 'float',
+    ParamSpec('verification.min_score', 0.22, 'float',
               'Least verification score for a plane to be published: the share of the '
               'textured image that the plane explains and the same plane moved 3 working '
               'pixels sideways or 1.5 up or down does not (12 and 6 px at 640 x 480); the '

@@ -56,7 +56,8 @@ The **confidence** maps the score linearly onto [0, 1] between
 :attr:`VerificationConfig.reject_score` (0.10, confidence 0) and
 :attr:`VerificationConfig.accept_score` (0.30, confidence 1); a plane is accepted at
 confidence 0.5 or more, i.e. a score of 0.20 (the pipeline sets both ends from
-``verification.min_score``, 0.25: confidence 0 at 0.15, 0.5 at 0.25, 1 at 0.35). Measured
+``verification.min_score``, 0.22 since session 25, 0.25 before: confidence 0 at 0.12, 0.5 at
+0.22, 1 at 0.32; docs/BENCHMARKS.md round 26). Measured
 with ``tools/evaluate_verification --count 200`` on the tuning seeds 0-199 (rendered, random
 gain and offset; 2026-12-01, session 12; the weighted score, the counted one in brackets, same
 scenes and code): the true planes scored 0.238-0.886, median 0.640 (counted 0.124-0.863,

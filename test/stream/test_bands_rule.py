@@ -43,9 +43,15 @@ def test_a_plane_explaining_the_top_over_the_bottom_is_refused(base, monkeypatch
     assert not result.ok and 'its own mask marks' in result.reason, result.reason
     result, error = _run(pair, far_field_off)
     assert result.ok and error > 5.0, (result.reason, error)
-    # Measured as before session 24 (0.349, confidence 0.99, bottom / top 0.221 / 0.375) the
-    # rule refuses it; without the rule the near-field rule does; without both it is published.
+    # Measured as before session 24 (0.349, confidence 0.99 under verification.min_score 0.25,
+    # bottom / top 0.221 / 0.375) the rule refuses it; without the rule the near-field rule
+    # does; without both it is published. (Under session 25's min_score 0.22 the confidence
+    # is 1 there and only the near-field rule looks.)
     monkeypatch.setattr(verification, 'EXACT_COVERAGE', False)
+    result, _ = _run(pair, config)
+    assert not result.ok and 'its own mask marks' in result.reason, result.reason
+    config, far_field_off = (replace(c, verification=replace(c.verification, min_score=0.25))
+                             for c in (config, far_field_off))
     result, _ = _run(pair, config)
     assert not result.ok and 'of its bottom' in result.reason, result.reason
     monkeypatch.setattr(trust, 'MIN_BOTTOM_OVER_TOP', 0.0)

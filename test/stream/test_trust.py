@@ -685,10 +685,17 @@ def test_a_winner_of_shallow_slope_is_doubted(monkeypatch):
     _floor_found_only_in_doubt(10022, monkeypatch)
 
 
-def _counted_all(config: PlaneNodeConfig | None = None) -> PlaneNodeConfig:
-    """Return ``config`` with every textured pixel counted (``verification.covisible`` off)."""
+def _counted_all(config: PlaneNodeConfig | None = None,
+                 min_score: float | None = None) -> PlaneNodeConfig:
+    """Return ``config`` with every textured pixel counted (``verification.covisible`` off).
+
+    ``min_score``: also this ``verification.min_score`` (a scene found under another one).
+    """
     config = PlaneNodeConfig() if config is None else config
-    return replace(config, verification=replace(config.verification, covisible=False))
+    verification = replace(config.verification, covisible=False)
+    if min_score is not None:
+        verification = replace(verification, min_score=min_score)
+    return replace(config, verification=verification)
 
 
 def test_a_look_alike_at_full_confidence_is_doubted(monkeypatch):
@@ -717,10 +724,13 @@ def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch,
     # A rough rig (tuning seed 12) whose best plane converges 1.1 px off the floor and then
     # explains 0.23 of the image, under verification.min_score 0.25 (the floor itself: 0.27):
     # refined photometrically it is verified within a pixel; without that nothing is published.
-    # Every textured pixel counted, as the scene was found: co-visible (the default since
-    # session 20) the floor scores enough without the rescue (published 0.18 px off).
+    # Every textured pixel counted and verification.min_score 0.25, as the scene was found:
+    # co-visible (the default since session 20) the floor scores enough without the rescue
+    # (published 0.18 px off), and so it does counted under session 25's min_score 0.22.
     frame = rough_rig(random_scene(12), random_rig_error(np.random.default_rng((12, 77))))
-    config = one_shot_search(_counted_all())
+    default = PlanePipeline(one_shot_search(_counted_all())).process(frame.left, frame.right, 0)
+    assert default.ok and plane_error_px(frame, default.homography) < 0.5, default.reason
+    config = one_shot_search(_counted_all(min_score=0.25))
     result = PlanePipeline(config).process(frame.left, frame.right, 0)
     assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
     assert 0.5 <= result.confidence < 1.0
