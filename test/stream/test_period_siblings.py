@@ -1,4 +1,4 @@
-"""A ground winner is judged beside its period siblings: a checker look-alike loses to its floor."""
+"""A ground winner is judged beside its period siblings: a checker look-alike loses."""
 
 from __future__ import annotations
 
