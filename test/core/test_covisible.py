@@ -12,6 +12,7 @@ from domplane_ros.tools.evaluate_real_rigs import kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
 import numpy as np
 import pytest
+from truth import FOUND_MIN_SCORE
 
 
 def _gate_config(width: int, min_score: float | None = None
@@ -51,7 +52,8 @@ def test_a_vertical_offset_no_longer_counts_the_near_road_against_the_truth(offs
                                         replace(_gate_config(pair.left.shape[1]),
                                                 covisible=False))
     assert default.accepted and 0.22 <= default.score < 0.25, default
-    config = replace(_gate_config(pair.left.shape[1], min_score=0.25), covisible=False)
+    config = replace(_gate_config(pair.left.shape[1], min_score=FOUND_MIN_SCORE),
+                     covisible=False)
     counted = verification.verify_plane(pair.left, pair.right, pair.truth, config)
     covisible = verification.verify_plane(pair.left, pair.right, pair.truth,
                                           replace(config, covisible=True))

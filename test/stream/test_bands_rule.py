@@ -12,14 +12,12 @@ alone refuses it; the rule is shown on it as measured before (``EXACT_COVERAGE``
 
 from __future__ import annotations
 
-from dataclasses import replace
-
 from domplane_ros.core import verification
 from domplane_ros.stream import trust
 from domplane_ros.tools.evaluate_real_rigs import configs, kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
 import pytest
-from truth import real_rig_result
+from truth import FOUND_MIN_SCORE, real_rig_result, with_verification
 
 
 @pytest.fixture(scope='module')
@@ -33,8 +31,7 @@ _run = real_rig_result
 def test_a_plane_explaining_the_top_over_the_bottom_is_refused(base, monkeypatch):
     pair = draw(base, 'crop', 94)
     config = configs()['default']
-    far_field_off = replace(config, verification=replace(config.verification,
-                                                         max_near_obstacle=1.0))
+    far_field_off = with_verification(config, max_near_obstacle=1.0)
     # Since session 24's exact coverage the crop's wrong plane (7.05 px off) scores 0.368, at
     # full confidence, where the rule does not look (bottom / top 0.265 / 0.372): session 22's
     # near-field rule alone refuses it (its own mask marks 82 % of the measured near road
@@ -50,7 +47,7 @@ def test_a_plane_explaining_the_top_over_the_bottom_is_refused(base, monkeypatch
     monkeypatch.setattr(verification, 'EXACT_COVERAGE', False)
     result, _ = _run(pair, config)
     assert not result.ok and 'its own mask marks' in result.reason, result.reason
-    config, far_field_off = (replace(c, verification=replace(c.verification, min_score=0.25))
+    config, far_field_off = (with_verification(c, min_score=FOUND_MIN_SCORE)
                              for c in (config, far_field_off))
     result, _ = _run(pair, config)
     assert not result.ok and 'of its bottom' in result.reason, result.reason

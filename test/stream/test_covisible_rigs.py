@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-from dataclasses import replace
-
-from domplane_ros.config import one_shot_search, PlaneNodeConfig
+from domplane_ros.config import one_shot_search
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.evaluate_real_rigs import kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
 import numpy as np
 import pytest
+from truth import FOUND_MIN_SCORE, with_verification
 
 
 @pytest.fixture(scope='module')
@@ -35,10 +34,9 @@ def test_a_rough_rig_on_real_texture_is_published_with_the_covisible_score(
     publishes it 0.51 px off either way); counted over the pixels both cameras see
     (``verification.covisible``, the default), the search publishes the road 0.51 px off.
     """
-    config = PlaneNodeConfig()
-    config = replace(config, verification=replace(config.verification, covisible=covisible))
+    config = with_verification(covisible=covisible)
     if not covisible:
-        found = replace(config, verification=replace(config.verification, min_score=0.25))
+        found = with_verification(config, min_score=FOUND_MIN_SCORE)
         result = PlanePipeline(one_shot_search(found)).process(
             rough_pair.left, rough_pair.right, 0)
         assert not result.ok

@@ -30,6 +30,7 @@ from domplane_ros.stream.pipeline import LOCKED, PlanePipeline
 from domplane_ros.stream.trust import TrustGate
 import numpy as np
 import pytest
+from truth import FOUND_MIN_SCORE, with_verification
 
 PERIOD_NS = 33_333_333
 
@@ -686,17 +687,12 @@ def test_a_winner_of_shallow_slope_is_doubted(monkeypatch):
     _floor_found_only_in_doubt(10022, monkeypatch)
 
 
-def _counted_all(config: PlaneNodeConfig | None = None,
-                 min_score: float | None = None) -> PlaneNodeConfig:
+def _counted_all(config: PlaneNodeConfig | None = None, **changes) -> PlaneNodeConfig:
     """Return ``config`` with every textured pixel counted (``verification.covisible`` off).
 
-    ``min_score``: also this ``verification.min_score`` (a scene found under another one).
+    ``changes``: other ``verification.*`` settings (e.g. a scene's ``min_score``).
     """
-    config = PlaneNodeConfig() if config is None else config
-    verification = replace(config.verification, covisible=False)
-    if min_score is not None:
-        verification = replace(verification, min_score=min_score)
-    return replace(config, verification=verification)
+    return with_verification(config, covisible=False, **changes)
 
 
 def test_a_look_alike_at_full_confidence_is_doubted(monkeypatch):
@@ -731,7 +727,7 @@ def test_a_near_miss_of_a_search_in_doubt_is_refined_onto_the_floor(monkeypatch,
     frame = rough_rig(random_scene(12), random_rig_error(np.random.default_rng((12, 77))))
     default = PlanePipeline(one_shot_search(_counted_all())).process(frame.left, frame.right, 0)
     assert default.ok and plane_error_px(frame, default.homography) < 0.5, default.reason
-    config = one_shot_search(_counted_all(min_score=0.25))
+    config = one_shot_search(_counted_all(min_score=FOUND_MIN_SCORE))
     result = PlanePipeline(config).process(frame.left, frame.right, 0)
     assert result.ok and plane_error_px(frame, result.homography) < 1.0, result.reason
     assert 0.5 <= result.confidence < 1.0

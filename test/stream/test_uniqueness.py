@@ -26,33 +26,27 @@ from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import distinct_planes, Verdict
 import numpy as np
 import pytest
+from truth import FOUND_MIN_SCORE, with_verification
 
 
 def _run(frame, config=None):
     return PlanePipeline(config).process(frame.left, frame.right, 0)
 
 
-def _counted_all(min_score: float | None = None) -> PlaneNodeConfig:
+def _counted_all(**changes) -> PlaneNodeConfig:
     """Return the default configuration with every textured pixel counted in the score.
 
     ``verification.covisible`` off, as before session 20: the scenes of the tests that use it
     were chosen so; co-visible (the default) each is solved or refused by a simpler rule,
-    said in each test, and the rule shown would go untested. ``min_score``: also this
-    ``verification.min_score`` (see :func:`_found`).
+    said in each test, and the rule shown would go untested. ``changes``: other
+    ``verification.*`` settings (e.g. the scene's ``min_score``, :data:`FOUND_MIN_SCORE`).
     """
-    config = PlaneNodeConfig() if min_score is None else _found(min_score)
-    return replace(config, verification=replace(config.verification, covisible=False))
+    return with_verification(covisible=False, **changes)
 
 
-def _found(min_score: float = 0.25) -> PlaneNodeConfig:
-    """Return the default configuration under the ``verification.min_score`` of its scene.
-
-    Some scenes were chosen under ``min_score`` 0.25 (the default until session 25): under
-    0.22 another plane of theirs is verified and judged first, and a simpler rule refuses it
-    (said in each test), so the rule shown would go untested.
-    """
-    config = PlaneNodeConfig()
-    return replace(config, verification=replace(config.verification, min_score=min_score))
+def _found() -> PlaneNodeConfig:
+    """Return the default configuration under :data:`FOUND_MIN_SCORE`, as its scene was found."""
+    return with_verification(min_score=FOUND_MIN_SCORE)
 
 
 def _wrong_without(frame, monkeypatch, *patches, config=None):
@@ -400,7 +394,7 @@ def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(
     frame, pipeline = _faint_both(11, _counted_all())
     result = pipeline.process(frame.left, frame.right, 0)
     assert not result.ok and 'not the ground of a level head' in result.reason, result.reason
-    frame, pipeline = _faint_both(11, _counted_all(0.25))
+    frame, pipeline = _faint_both(11, _counted_all(min_score=FOUND_MIN_SCORE))
     result = pipeline.process(frame.left, frame.right, 0)
     # The rival is no floor of swapped cameras (read so, its own mask sees no ground; session
     # 23 names it by its slope, the decision is the same): ambiguous.
@@ -409,7 +403,7 @@ def test_a_swapped_rival_is_refuted_only_where_nothing_lies_beyond_the_winner(
     monkeypatch.setattr(uniqueness_module, 'MAX_WINNER_BEYOND', math.inf)
     # Round 18's roll of a published ground plane refuses it too.
     monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
-    frame, pipeline = _faint_both(11, _counted_all(0.25))
+    frame, pipeline = _faint_both(11, _counted_all(min_score=FOUND_MIN_SCORE))
     without = pipeline.process(frame.left, frame.right, 0)
     # 3.5 px off since the refinement samples the faint floor (round 12; 6.1 px before it):
     # still not the floor.
