@@ -148,12 +148,13 @@ class CandidateWork:
             # unrefined).
             final, again = self.photometric(step, problem, best, verdict)
             return final, replace(again, uniqueness=verdict.uniqueness,
-                                  beyond_rival=verdict.beyond_rival)
+                                  beyond_rival=verdict.beyond_rival,
+                                  twin_rival=verdict.twin_rival)
         final, again = self.tightened(step, problem, final, again)
         final, again = self.photometric(step, problem, final, again)
         return (replace(final, candidates_tried=best.candidates_tried),
                 replace(again, uniqueness=verdict.uniqueness,
-                        beyond_rival=verdict.beyond_rival))
+                        beyond_rival=verdict.beyond_rival, twin_rival=verdict.twin_rival))
 
     def tightened(self, step: PairStep, problem: TwoStep, estimate: PlaneEstimate,
                   verdict: Verdict) -> tuple[PlaneEstimate, Verdict]:

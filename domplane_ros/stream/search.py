@@ -31,7 +31,8 @@ from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.refusals import Refusal, SEARCH
 from domplane_ros.stream.swap import swap_rivals
 from domplane_ros.stream.trust import TrustGate, weak_below_refusal
-from domplane_ros.stream.verdict import BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, Verdict
+from domplane_ros.stream.verdict import (BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, TWIN_RIVAL_SHARE,
+                                         Verdict)
 import numpy as np
 
 # The swapped rivals stop at the candidates' tolerance (CandidateWork.rival_options); their
@@ -504,13 +505,13 @@ class PlaneSearch:
 
 
 def _finish_refusal(verdict: Verdict) -> str:
-    """Return why a finished winner is refused ('' if not): beyond it, or weak evidence.
+    """Return why a finished winner is refused ('' if not): a better refused plane, weak evidence.
 
-    :func:`_beyond_refusal`, then :func:`~domplane_ros.stream.trust.weak_below_refusal` (only
-    if :data:`WEAK_BELOW_REFUSAL`).
+    :func:`_beyond_refusal`, :func:`_twin_refusal`, then
+    :func:`~domplane_ros.stream.trust.weak_below_refusal` (only if :data:`WEAK_BELOW_REFUSAL`).
     """
-    return _beyond_refusal(verdict) or (weak_below_refusal(verdict) if WEAK_BELOW_REFUSAL
-                                        else '')
+    return (_beyond_refusal(verdict) or _twin_refusal(verdict)
+            or (weak_below_refusal(verdict) if WEAK_BELOW_REFUSAL else ''))
 
 
 def _beyond_refusal(verdict: Verdict) -> str:
@@ -525,3 +526,20 @@ def _beyond_refusal(verdict: Verdict) -> str:
     return (f'ambiguous: a plane refused for the texture beyond it explains the image better '
             f'(score {verdict.beyond_rival:.2f} against {verdict.score:.2f} for the best plane '
             'finished); a plane through obstacles, or the floor not found?')
+
+
+def _twin_refusal(verdict: Verdict) -> str:
+    """Return why a finished winner is refused for a better refused twin ('' if not).
+
+    :data:`~domplane_ros.stream.verdict.TWIN_RIVAL_SHARE`: the winner must score at least
+    that share of its ``twin_rival``, the best plane of its pick that maps the image bottom as
+    it does but was refused though a ground plane (the band between the top and bottom it
+    explains).
+    """
+    if not verdict.twin_rival or verdict.score >= TWIN_RIVAL_SHARE * verdict.twin_rival:
+        return ''
+    return (f'ambiguous: a plane through the same ground at the image bottom explains the image '
+            f'better (score {verdict.twin_rival:.2f} against {verdict.score:.2f} for the best '
+            f'plane finished, > {1.0 / TWIN_RIVAL_SHARE:g} x) but was refused for the band '
+            'between its top and bottom; an obstacle filling the middle of the view, or a '
+            'far wall aliasing the floor?')

@@ -35,7 +35,7 @@ from domplane_ros.core.flatness import one_plane_residual_px
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import AgreementMaps, own_region
 from domplane_ros.stream.verdict import (BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, distinct_planes,
-                                         is_rival, Verdict)
+                                         is_rival, TWIN_RIVAL_SHARE, Verdict)
 import numpy as np
 
 # In ground mode the winner must also beat every distinct plane of this head by
@@ -125,9 +125,15 @@ class Uniqueness:
         # The best plane refused only for the texture beyond it, if it outscores the winner
         # (BEYOND_RIVAL_SHARE): the search compares it with the winner once finished.
         beyond = max((v.score for _, _, v in judged if v.beyond), default=0.0)
+        # The best plane of the winner's own ground (the same over the bottom rows) refused
+        # though a ground plane (TWIN_RIVAL_SHARE): compared with the winner once finished.
+        twin = max((v.score for _, h, v in judged
+                    if v.ground and not v.accepted and not v.swapped
+                    and not distinct_planes(h, best_h, width, height)), default=0.0)
         verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
                           beyond_rival=(beyond if beyond >= BEYOND_RIVAL_SHARE * verdict.score
-                                        else 0.0))
+                                        else 0.0),
+                          twin_rival=twin if twin >= TWIN_RIVAL_SHARE * verdict.score else 0.0)
         if verdict.uniqueness >= CHALLENGE_MARGIN:
             shared = self.shared_rival(left, right, best_h, verdict, judged, roi)
             if shared:

@@ -36,6 +36,21 @@ GROUND_ROWS = 0.6
 # Compared before the finish it lost correct planes (a review, session 14: 5 of 1,200 pairs,
 # e.g. cold 7024, a pick 6.4 px off at 0.39 that finished 0.13 px off at 0.70).
 BEYOND_RIVAL_SHARE = 1.0
+# Likewise a search's winner, once finished, must score at least this share of every plane of
+# its pick that maps the image bottom as it does (not distinct_planes) and was refused though
+# a ground plane (``Verdict.ground``: the band between the top and bottom it explains,
+# trust.MIN_MIDDLE_SHARE; ``Verdict.twin_rival``, stream/search.py): else the winner is a
+# partial fit of a ground that explains the image clearly better (CHALLENGE_MARGIN times) but
+# was refused, and which of the two is the floor cannot be told. Such a plane is no rival for
+# uniqueness (the same plane by the bottom rows). Measured: rendered held-out ahead 23025, a
+# box close ahead filling the middle of the view; the floor (0.15 px off, score 0.63) was
+# refused for its middle band (91 % of the top and 71 % of the bottom explained, 26 %
+# between), and a plane 12.6 px off (10.7 px finished, 0.37: 1.69 times less), within 8 px of
+# it over the bottom rows, was published. A share of 1 (any twin scoring more) also refused
+# four planes published under 5 px on the tuning seeds 0-39 (ahead 10 and 23, floors 1,
+# floors_rough 1: 0.65, 1.71, 0.21 and 1.36 px off, twins 1.05-1.18 times their score); the
+# margin keeps them (docs/BENCHMARKS.md round 29).
+TWIN_RIVAL_SHARE = 1.0 / CHALLENGE_MARGIN
 
 
 @dataclass(frozen=True)
@@ -59,6 +74,10 @@ class Verdict:
             only for the texture beyond it, if at least :data:`BEYOND_RIVAL_SHARE` x the
             winner's score (:meth:`Uniqueness.ground_winner`), else 0: the winner finished
             must score at least that share of it to be published.
+        twin_rival: The best score of a plane judged beside a search's winner, the same plane
+            as it over the image bottom (not :func:`distinct_planes`) but refused though a
+            ground plane, if at least :data:`TWIN_RIVAL_SHARE` x the winner's score, else 0:
+            the winner finished must score at least that share of it to be published.
         lock_refusal: For a locked plane refused by a hold of the lock, which one:
             ``'drop'`` (its recent median, ``verification.drop_ratio``), ``'reference'`` or
             ``'bottom'`` (the plane it started from, ``trust.LOCK_REFERENCE``); else ''
@@ -73,6 +92,7 @@ class Verdict:
     ground: bool = True
     beyond: bool = False
     beyond_rival: float = 0.0
+    twin_rival: float = 0.0
     lock_refusal: str = ''
 
     @property
