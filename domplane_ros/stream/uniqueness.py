@@ -111,8 +111,8 @@ class Uniqueness:
             roi: Region of the left image (fractions), as ``features.roi``.
 
         Returns:
-            The winner and its verdict (uniqueness and ``beyond_rival`` set), or None, None and
-            why the pair is ambiguous.
+            The winner and its verdict (uniqueness, ``beyond_rival`` and ``twin_rival`` set), or
+            None, None and why the pair is ambiguous.
 
         """
         height, width = left.shape
@@ -125,10 +125,12 @@ class Uniqueness:
         # The best plane refused only for the texture beyond it, if it outscores the winner
         # (BEYOND_RIVAL_SHARE): the search compares it with the winner once finished.
         beyond = max((v.score for _, _, v in judged if v.beyond), default=0.0)
-        # The best plane of the winner's own ground (the same over the bottom rows) refused
-        # though a ground plane (TWIN_RIVAL_SHARE): compared with the winner once finished.
+        # The best plane of the winner's own ground (the same over the bottom rows) verified but
+        # refused though a ground plane, i.e. for its middle band (TWIN_RIVAL_SHARE), if at
+        # least that share of the winner's score at the pick (the refusal compares it with the
+        # winner's finished score): compared with the winner once finished.
         twin = max((v.score for _, h, v in judged
-                    if v.ground and not v.accepted and not v.swapped
+                    if v.ground and not v.accepted and not v.swapped and v.verification.accepted
                     and not distinct_planes(h, best_h, width, height)), default=0.0)
         verdict = replace(verdict, uniqueness=verdict.score / top if top > 0 else math.inf,
                           beyond_rival=(beyond if beyond >= BEYOND_RIVAL_SHARE * verdict.score

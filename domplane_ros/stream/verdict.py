@@ -37,9 +37,10 @@ GROUND_ROWS = 0.6
 # e.g. cold 7024, a pick 6.4 px off at 0.39 that finished 0.13 px off at 0.70).
 BEYOND_RIVAL_SHARE = 1.0
 # Likewise a search's winner, once finished, must score at least this share of every plane of
-# its pick that maps the image bottom as it does (not distinct_planes) and was refused though
-# a ground plane (``Verdict.ground``: the band between the top and bottom it explains,
-# trust.MIN_MIDDLE_SHARE; ``Verdict.twin_rival``, stream/search.py): else the winner is a
+# its pick that maps the image bottom as it does (not distinct_planes) and was verified but
+# refused though a ground plane (``Verdict.ground``: in a search only for the band between the
+# top and bottom it explains, trust.MIN_MIDDLE_SHARE; ``Verdict.twin_rival``,
+# stream/search.py): else the winner is a
 # partial fit of a ground that explains the image clearly better (CHALLENGE_MARGIN times) but
 # was refused, and which of the two is the floor cannot be told. Such a plane is no rival for
 # uniqueness (the same plane by the bottom rows). Measured: rendered held-out ahead 23025, a
@@ -75,9 +76,10 @@ class Verdict:
             winner's score (:meth:`Uniqueness.ground_winner`), else 0: the winner finished
             must score at least that share of it to be published.
         twin_rival: The best score of a plane judged beside a search's winner, the same plane
-            as it over the image bottom (not :func:`distinct_planes`) but refused though a
-            ground plane, if at least :data:`TWIN_RIVAL_SHARE` x the winner's score, else 0:
-            the winner finished must score at least that share of it to be published.
+            as it over the image bottom (not :func:`distinct_planes`), verified but refused
+            though a ground plane (for its middle band), if at least :data:`TWIN_RIVAL_SHARE`
+            x the winner's score at the pick, else 0: the winner finished must score at least
+            that share of it to be published.
         lock_refusal: For a locked plane refused by a hold of the lock, which one:
             ``'drop'`` (its recent median, ``verification.drop_ratio``), ``'reference'`` or
             ``'bottom'`` (the plane it started from, ``trust.LOCK_REFERENCE``); else ''

@@ -2,13 +2,37 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
+from domplane_ros.core.verification import PlaneVerification
 from domplane_ros.sim.generators import ahead_scene
 from domplane_ros.sim.rigs import plane_error_px
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import TrustGate
+from domplane_ros.stream.verdict import CHALLENGE_MARGIN, TWIN_RIVAL_SHARE, Verdict
 import numpy as np
+import pytest
+
+
+@pytest.mark.parametrize('twin, refused', [
+    (0.0, False),  # no twin judged
+    (0.30, False),  # a twin scoring less
+    (0.99 * CHALLENGE_MARGIN * 0.30, False),  # more, but within the margin
+    (1.01 * CHALLENGE_MARGIN * 0.30, True),
+    (2.0 * 0.30, True),
+])
+def test_a_finished_winner_must_score_a_share_of_its_twin(twin, refused):
+    assert TWIN_RIVAL_SHARE == pytest.approx(1.0 / CHALLENGE_MARGIN)
+    check = PlaneVerification(accepted=True, score=0.30, confidence=0.9, support_fraction=0.5,
+                              overlap_fraction=0.9, textured_fraction=0.6, reason='',
+                              time_ms=0.0)
+    verdict = replace(Verdict(True, check, ''), twin_rival=twin)
+    reason = search_module._finish_refusal(verdict)
+    assert bool(reason) == refused
+    if refused:
+        assert 'same ground at the image bottom' in reason
 
 
 def test_a_partial_fit_beside_a_refused_floor_is_not_published(monkeypatch):
