@@ -147,14 +147,11 @@ class CandidateWork:
             # 5.2 px off the floor, whose refinement lands 0.07 px from it, was published
             # unrefined).
             final, again = self.photometric(step, problem, best, verdict)
-            return final, replace(again, uniqueness=verdict.uniqueness,
-                                  beyond_rival=verdict.beyond_rival,
-                                  twin_rival=verdict.twin_rival)
+            return final, again.with_pick(verdict)
         final, again = self.tightened(step, problem, final, again)
         final, again = self.photometric(step, problem, final, again)
         return (replace(final, candidates_tried=best.candidates_tried),
-                replace(again, uniqueness=verdict.uniqueness,
-                        beyond_rival=verdict.beyond_rival, twin_rival=verdict.twin_rival))
+                again.with_pick(verdict))
 
     def tightened(self, step: PairStep, problem: TwoStep, estimate: PlaneEstimate,
                   verdict: Verdict) -> tuple[PlaneEstimate, Verdict]:

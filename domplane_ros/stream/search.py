@@ -514,6 +514,16 @@ def _finish_refusal(verdict: Verdict) -> str:
             or (weak_below_refusal(verdict) if WEAK_BELOW_REFUSAL else ''))
 
 
+def _rival_refusal(verdict: Verdict, rival: float, share: float) -> str:
+    """Return the scores' part of a refusal for a better rival ('' if the winner holds).
+
+    The winner must score at least ``share`` x ``rival`` (0: no rival was recorded).
+    """
+    if not rival or verdict.score >= share * rival:
+        return ''
+    return f'(score {rival:.2f} against {verdict.score:.2f} for the best plane finished'
+
+
 def _beyond_refusal(verdict: Verdict) -> str:
     """Return why a finished winner is refused for a better plane beyond it ('' if not).
 
@@ -521,11 +531,10 @@ def _beyond_refusal(verdict: Verdict) -> str:
     that share of its ``beyond_rival``, the best plane of its pick refused only for the
     texture beyond it.
     """
-    if not verdict.beyond_rival or verdict.score >= BEYOND_RIVAL_SHARE * verdict.beyond_rival:
-        return ''
-    return (f'ambiguous: a plane refused for the texture beyond it explains the image better '
-            f'(score {verdict.beyond_rival:.2f} against {verdict.score:.2f} for the best plane '
-            'finished); a plane through obstacles, or the floor not found?')
+    scores = _rival_refusal(verdict, verdict.beyond_rival, BEYOND_RIVAL_SHARE)
+    return scores and ('ambiguous: a plane refused for the texture beyond it explains the '
+                       f'image better {scores}); a plane through obstacles, or the floor not '
+                       'found?')
 
 
 def _twin_refusal(verdict: Verdict) -> str:
@@ -536,10 +545,8 @@ def _twin_refusal(verdict: Verdict) -> str:
     it does but was refused though a ground plane (the band between the top and bottom it
     explains).
     """
-    if not verdict.twin_rival or verdict.score >= TWIN_RIVAL_SHARE * verdict.twin_rival:
-        return ''
-    return (f'ambiguous: a plane through the same ground at the image bottom explains the image '
-            f'better (score {verdict.twin_rival:.2f} against {verdict.score:.2f} for the best '
-            f'plane finished, > {1.0 / TWIN_RIVAL_SHARE:g} x) but was refused for the band '
-            'between its top and bottom; an obstacle filling the middle of the view, or a '
-            'far wall aliasing the floor?')
+    scores = _rival_refusal(verdict, verdict.twin_rival, TWIN_RIVAL_SHARE)
+    return scores and ('ambiguous: a plane through the same ground at the image bottom '
+                       f'explains the image better {scores}, > {1.0 / TWIN_RIVAL_SHARE:g} x) '
+                       'but was refused for the band between its top and bottom; an obstacle '
+                       'filling the middle of the view, or a far wall aliasing the floor?')

@@ -8,7 +8,7 @@ it or why not, its confidence, its uniqueness among the planes judged on the sam
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 import math
 
 from domplane_ros.core.verification import PlaneVerification
@@ -110,6 +110,16 @@ class Verdict:
         unique = float(np.clip((self.uniqueness - 1.0) / (2.0 * (CHALLENGE_MARGIN - 1.0)),
                                0.0, 1.0)) if math.isfinite(self.uniqueness) else 1.0
         return min(self.verification.confidence, unique)
+
+    def with_pick(self, pick: Verdict) -> Verdict:
+        """Return this verdict with what the pick found beside its plane: ``pick``'s.
+
+        The fields set by :meth:`Uniqueness.ground_winner` (``uniqueness``, ``beyond_rival``,
+        ``twin_rival``): a finished or refined plane is judged again alone, and keeps what
+        its candidate was compared with.
+        """
+        return replace(self, uniqueness=pick.uniqueness, beyond_rival=pick.beyond_rival,
+                       twin_rival=pick.twin_rival)
 
     @property
     def score(self) -> float:
