@@ -24,6 +24,9 @@ from std_msgs.msg import Float64MultiArray
 from test_node import _prior_overrides
 
 RIGHT_TOPIC = '/right/image_raw'
+# Both tests measure DDS delivery (input rates, losses and latencies under a 100 Hz burst):
+# `make test` runs them alone, after the other tests (Makefile).
+pytestmark = pytest.mark.ros_timing
 
 
 def _mono8(gray: np.ndarray, stamp_ns: int, frame_id: str):
