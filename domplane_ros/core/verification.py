@@ -113,6 +113,19 @@ PEAK_PROBES = ((1.0, 0.0), (-1.0, 0.0))
 # False: the old test.
 EXACT_COVERAGE = True
 _FULLY_COVERED = 1.0 - 1e-4
+# With EXACT_COVERAGE, the right image's no-data border counts as outside it too: the pixels
+# of value exactly 0 (at the working scale, after the shrink) connected to the image's edge,
+# grown by NO_DATA_GROW_PX working pixels over the values the shrink mixed with them (each
+# pyrDown's 5-tap kernel reaches 1 pixel of its output, the chain 1 + 1/2 + 1/4 + ... < 2;
+# grown by 1, the real rough rig 26001 below kept its road at 0.20). A warp
+# or a rectification with alpha > 0 leaves such a border where the camera's image has no data
+# (the evaluation's rig errors warp the right image so: tools/evaluation/real_rigs.py,
+# sim/rigs.py); a left pixel mapped onto it cannot be seen by both cameras, and counting it
+# against the plane refused the true road of real rough rigs (docs/BENCHMARKS.md round 30).
+# Dark scene clipped to 0 along the edge counts alike: it is flat in the right image, so no
+# plane could be verified on it. False: the image's frame alone, as before session 26.
+NO_DATA_BORDER = True
+NO_DATA_GROW_PX = 2
 
 # The lowest share of the region's rows over which PlaneVerification.bottom_score is measured.
 BOTTOM_BAND = 1.0 / 3.0
@@ -370,6 +383,8 @@ class WorkingPair:
         right_map: (3, 3) pixel map from the full right image to ``right``.
         full_shape: (H, W) of the full images.
         width: The working width it was made for.
+        right_valid: (h', w') float32 1 where ``right`` has data, 0 on its no-data border
+            (:data:`NO_DATA_BORDER`); None: every pixel.
     """
 
     left: np.ndarray
@@ -378,6 +393,7 @@ class WorkingPair:
     right_map: np.ndarray
     full_shape: tuple[int, int]
     width: int
+    right_valid: np.ndarray | None = None
 
 
 def working_pair(left: np.ndarray, right: np.ndarray,
@@ -413,7 +429,27 @@ def _working(left: np.ndarray, right: np.ndarray, config: VerificationConfig,
     right_small, scale_right = _shrink(right, int(round(
         config.working_width_px * right.shape[1] / left.shape[1])), right_level)
     return WorkingPair(left_small, scale_left, right_small, scale_right,
-                       (int(left.shape[0]), int(left.shape[1])), int(config.working_width_px))
+                       (int(left.shape[0]), int(left.shape[1])), int(config.working_width_px),
+                       no_data_valid(right_small) if NO_DATA_BORDER else None)
+
+
+def no_data_valid(image: np.ndarray) -> np.ndarray | None:
+    """Return (h, w) float32 1 where ``image`` has data, 0 on its no-data border; None if none.
+
+    See :data:`NO_DATA_BORDER`: the pixels of value exactly 0 connected (4-neighbours) to the
+    image's edge, grown by :data:`NO_DATA_GROW_PX`.
+    """
+    zero = (image == 0).astype(np.uint8)
+    if not (zero[0].any() or zero[-1].any() or zero[:, 0].any() or zero[:, -1].any()):
+        return None
+    count, labels = cv2.connectedComponents(zero, connectivity=4)
+    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
+    edge = edge[edge > 0]
+    border = np.isin(labels, edge).astype(np.uint8)
+    if NO_DATA_GROW_PX > 0:
+        side = 2 * NO_DATA_GROW_PX + 1
+        border = cv2.dilate(border, np.ones((side, side), np.uint8))
+    return (1 - border).astype(np.float32)
 
 
 def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: VerificationConfig,
@@ -455,7 +491,9 @@ def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: Verifica
     if EXACT_COVERAGE:
         # Every interpolation weight must fall inside the right image: a pixel mapped
         # between its last row and the border mixes the border into the window.
-        covered = cv2.warpPerspective(np.ones_like(right_f), hom_small, right_f_border,
+        valid = working.right_valid
+        covered = cv2.warpPerspective(np.ones_like(right_f) if valid is None else valid,
+                                      hom_small, right_f_border,
                                       flags=flags, borderMode=cv2.BORDER_CONSTANT,
                                       borderValue=0.0)
         outside = cv2.blur((covered < _FULLY_COVERED).astype(np.float32), size) > 0
