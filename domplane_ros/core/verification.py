@@ -121,7 +121,7 @@ _FULLY_COVERED = 1.0 - 1e-4
 # or a rectification with alpha > 0 leaves such a border where the camera's image has no data
 # (the evaluation's rig errors warp the right image so: tools/evaluation/real_rigs.py,
 # sim/rigs.py); a left pixel mapped onto it cannot be seen by both cameras, and counting it
-# against the plane refused the true road of real rough rigs (docs/BENCHMARKS.md round 30).
+# against the plane refused the true road of real rough rigs (docs/BENCHMARKS.md rounds 30-31).
 # Dark scene clipped to 0 along the edge counts alike: it is flat in the right image, so no
 # plane could be verified on it. False: the image's frame alone, as before session 26.
 NO_DATA_BORDER = True
