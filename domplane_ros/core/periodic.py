@@ -71,12 +71,13 @@ def period_vectors(image: np.ndarray, mask: np.ndarray, count: int = 2) -> np.nd
     centre = np.array([shape[1] // 2, shape[0] // 2])
     dy, dx = np.mgrid[0:shape[0], 0:shape[1]]
     near = np.hypot(dx - centre[0], dy - centre[1]) < MIN_SHIFT_PX
-    # The local maxima: compared in the float32 that cv2.dilate takes (a float64 value whose
-    # float32 rounds up was not its own maximum: the period of a 32 cm checker, rendered
-    # floors_rough 23028, was lost or found by how its peak rounded: 0.478594649 in float64,
-    # 0.478594661 in float32).
-    norm32 = norm.astype(np.float32)
-    peaks = (norm32 >= cv2.dilate(norm32, np.ones((3, 3))))
+    # The local maxima, compared exactly: cv2.dilate in float64. (Against the dilated float32
+    # copy, a peak whose float32 rounded up was not its own maximum: the period of a 32 cm
+    # checker, rendered floors_rough 23028, was lost or found by how its peak rounded,
+    # 0.478594649 in float64, 0.478594661 in float32; compared in float32 on both sides, every
+    # member of a float32 plateau was a peak, and a neighbour of a short period's peak could
+    # displace the second period.)
+    peaks = norm >= cv2.dilate(norm, np.ones((3, 3)))
     peaks &= (norm >= MIN_PEAK) & ~near
     py, px = np.nonzero(peaks)
     # A repeat, not the slope of the central lobe: the correlation dips half-way to it.

@@ -62,3 +62,17 @@ def test_a_repeat_is_found_however_its_peak_rounds_to_float32():
         vectors = period_vectors(image, ~holes)
         periods = sorted(tuple(abs(v) + 0.0) for v in vectors)
         assert periods == [(0.0, 13.0), (17.0, 0.0)], (seed, periods)
+
+
+@pytest.mark.parametrize('width', [4, 5, 8, 12])
+def test_stripes_give_their_one_period_not_a_neighbour_of_its_peak(width):
+    # Diagonal stripes repeat only by shifts that move x + y by a multiple of two widths (or
+    # along the stripes): every vector returned must be such a repeat, not a neighbour of one
+    # (the local maxima are compared exactly, so a plateau's members are not all peaks).
+    ys, xs = np.mgrid[0:64, 0:64]
+    image = (((xs + ys) // width) % 2 * 200 + 30).astype(np.float32)
+    vectors = period_vectors(cv2.GaussianBlur(image, (0, 0), 0.7), np.ones((64, 64), bool))
+    assert vectors.shape[0] >= 1
+    for vector in vectors:
+        # Every repeat of the stripes shifts x + y by a multiple of two widths.
+        assert abs(vector[0] + vector[1]) % (2 * width) < 1e-9, (width, vectors)
