@@ -430,7 +430,7 @@ def _working(left: np.ndarray, right: np.ndarray, config: VerificationConfig,
         config.working_width_px * right.shape[1] / left.shape[1])), right_level)
     return WorkingPair(left_small, scale_left, right_small, scale_right,
                        (int(left.shape[0]), int(left.shape[1])), int(config.working_width_px),
-                       no_data_valid(right_small) if NO_DATA_BORDER else None)
+                       no_data_valid(right_small) if NO_DATA_BORDER and EXACT_COVERAGE else None)
 
 
 def no_data_valid(image: np.ndarray) -> np.ndarray | None:
@@ -442,7 +442,7 @@ def no_data_valid(image: np.ndarray) -> np.ndarray | None:
     zero = (image == 0).astype(np.uint8)
     if not (zero[0].any() or zero[-1].any() or zero[:, 0].any() or zero[:, -1].any()):
         return None
-    count, labels = cv2.connectedComponents(zero, connectivity=4)
+    _, labels = cv2.connectedComponents(zero, connectivity=4)
     edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
     edge = edge[edge > 0]
     border = np.isin(labels, edge).astype(np.uint8)
