@@ -77,6 +77,14 @@ NEAR_MISSES = 2
 # gets stronger: a rival is dropped only where its own refinement joins the winner.
 CONTENDERS = 6
 REFINE_CONTENDERS = True
+# A ground search whose pick ends ambiguous between distinct planes judges the period siblings
+# of its best verified plane (PlaneSearch._sibling_pick, as a winner's): two look-alikes of a
+# periodic floor, each some periods off, can tie within CHALLENGE_MARGIN while neither is the
+# floor, and the floor is the sibling of either (rendered floors_rough 23028, a 32 cm checker
+# on a rough rig: the look-alikes 125 and 144 px off scored 0.354 and 0.279, 1.27 x apart; a
+# verification that moves them a few hundredths ties them and the floor, 0.603, was never
+# judged; docs/BENCHMARKS.md round 32). False: the siblings of a winner only.
+AMBIGUOUS_SIBLINGS = True
 # The reason of a pick ambiguous between planes of this head (Uniqueness.ground_winner).
 AMBIGUOUS_DISTINCT = 'ambiguous: a distinct plane'
 # Refuse a finished winner verified with less than full confidence that leaves more than
@@ -224,6 +232,11 @@ class PlaneSearch:
                 best, verdict, unverified = self._checked_pick(search, pick)
         if verdict is not None:
             best, verdict, unverified = self._sibling_pick(step, search, pool, best, pick)
+        elif (AMBIGUOUS_SIBLINGS and unverified.startswith(AMBIGUOUS_DISTINCT)
+              and self._config().verification.plane != 'any'):
+            leader = self._best_verified(step, pool)
+            if leader is not None:
+                best, verdict, unverified = self._sibling_pick(step, search, pool, leader, pick)
         if not pool and not rejection and len(search.tried) >= limit:
             # The corners gave no plane at all, not even a refused one (every start had too
             # few inliers: a floor of few corners): the coarse planes refined
@@ -327,6 +340,13 @@ class PlaneSearch:
                 pool.append(rescued)
                 added = True
         return added
+
+    def _best_verified(self, step: PairStep, pool: list[PlaneEstimate]
+                       ) -> PlaneEstimate | None:
+        """Return the pool's best-scoring plane the gate accepts, or None."""
+        accepted = [(verdict.score, index) for index, (verdict, _) in
+                    enumerate(self._judged_pool(step, pool)) if verdict.accepted]
+        return pool[max(accepted)[1]] if accepted else None
 
     def _judged_pool(self, step: PairStep, pool: list[PlaneEstimate]
                      ) -> list[tuple[Verdict, PlaneEstimate]]:
