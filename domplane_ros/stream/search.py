@@ -83,7 +83,8 @@ REFINE_CONTENDERS = True
 # floor, and the floor is the sibling of either (rendered floors_rough 23028, a 32 cm checker
 # on a rough rig: the look-alikes 125 and 144 px off scored 0.354 and 0.279, 1.27 x apart; a
 # verification that moves them a few hundredths ties them and the floor, 0.603, was never
-# judged; docs/BENCHMARKS.md round 32). False: the siblings of a winner only.
+# judged; docs/BENCHMARKS.md rounds 32 and 33: on the tuning sets no decision changed). False:
+# the siblings of a winner only.
 AMBIGUOUS_SIBLINGS = True
 # The reason of a pick ambiguous between planes of this head (Uniqueness.ground_winner).
 AMBIGUOUS_DISTINCT = 'ambiguous: a distinct plane'
@@ -281,7 +282,10 @@ class PlaneSearch:
                       best: PlaneEstimate,
                       pick: Callable[[], tuple[PlaneEstimate | None, Verdict | None, str]]
                       ) -> tuple[PlaneEstimate | None, Verdict | None, str]:
-        """Judge the winner's period siblings with the pool and pick again.
+        """Judge the period siblings of ``best`` with the pool and pick again.
+
+        ``best``: the winner, or the best verified plane of a pick ambiguous between distinct
+        planes (:data:`AMBIGUOUS_SIBLINGS`).
 
         :meth:`~domplane_ros.stream.coarse_planes.CoarsePlanes.siblings`: on a periodic board
         a look-alike some squares off can win a search that never judged the board's plane;
