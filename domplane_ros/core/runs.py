@@ -35,6 +35,9 @@ class StageState(NamedTuple):
         energy: The joint energy.
         closest: (rows, 2) closest positions.
         move: The largest prediction move of the last round, pixels.
+        beta: The extrapolation's next factor (``estimator.EXTRAPOLATE``).
+        h_before: (3, 3) float64 ``H`` before the last round where the stage stopped for
+            the tolerance (a smaller one runs that round's trial step first), else None.
     """
 
     rounds: int
@@ -47,6 +50,8 @@ class StageState(NamedTuple):
     energy: float
     closest: np.ndarray
     move: float = np.inf
+    beta: float = 1.0
+    h_before: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
