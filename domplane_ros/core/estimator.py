@@ -326,7 +326,8 @@ class TwoStep:
         closest))`` after its local step; None (and ``beta`` back to 1) where it is not finite
         or does not lower the joint ``energy``.
         """
-        beta = min(beta, EXTRAPOLATE_MAX_MOVE_PX / move)
+        if move > 0.0:
+            beta = min(beta, EXTRAPOLATE_MAX_MOVE_PX / move)
         trial = h + beta * (h - h_before)
         if not np.all(np.isfinite(trial)):
             return None, 1.0
