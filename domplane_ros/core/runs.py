@@ -35,6 +35,9 @@ class StageState(NamedTuple):
         energy: The joint energy.
         closest: (rows, 2) closest positions.
         move: The largest prediction move of the last round, pixels.
+        beta: The extrapolation's next factor (``TwoStep.estimate``'s ``extrapolate``).
+        h_before: (3, 3) float64 ``H`` before the last round where the stage stopped for
+            the tolerance (a smaller one runs that round's trial step first), else None.
     """
 
     rounds: int
@@ -47,6 +50,8 @@ class StageState(NamedTuple):
     energy: float
     closest: np.ndarray
     move: float = np.inf
+    beta: float = 1.0
+    h_before: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -75,7 +80,8 @@ class RunRecord:
     stages: list[StageEnd] = field(default_factory=list)
 
     @staticmethod
-    def key(start: np.ndarray, options: EstimatorConfig, far: bool) -> tuple:
-        """Return a run's key: the start's bytes, ``far``, every setting but the tolerance."""
+    def key(start: np.ndarray, options: EstimatorConfig, far: bool,
+            extrapolate: bool = False) -> tuple:
+        """Return a run's key: start bytes, ``far``, ``extrapolate``, settings but tolerance."""
         rest = tuple(getattr(options, f.name) for f in fields(options) if f.name != 'tolerance_px')
-        return np.ascontiguousarray(start, np.float64).tobytes(), far, rest
+        return np.ascontiguousarray(start, np.float64).tobytes(), far, extrapolate, rest

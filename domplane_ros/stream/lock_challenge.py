@@ -121,7 +121,9 @@ class LockChallenge:
         """Refine one start, verify it; return it finished if it beats the lock, else None."""
         trust, config = self._trust(), self._config()
         options = self._work().options if task.kind == PRIOR_START else config.estimator
-        result = problem.estimate(task.start, options, widen=False)
+        # Extrapolated: most features are outliers to a challenger's start and the plain
+        # iteration creeps (docs/speed.md round 15).
+        result = problem.estimate(task.start, options, widen=False, extrapolate=True)
         if not result.ok or self._checks.rejection_reason(
                 result, feats, size, bounds=task.kind == PRIOR_START):
             return None

@@ -74,6 +74,50 @@ def test_paper_b_robust_flags_off_plane_point_least_squares_is_biased(seed):
     assert plane_error_px(refined.homography, h, on_plane) < 0.05
 
 
+@pytest.mark.parametrize('outlier_fraction', [0.3, 0.6, 0.8])
+def test_extrapolation_keeps_the_energy_falling_and_solves_what_the_plain_run_solves(
+        outlier_fraction):
+    # The extrapolation's trial steps (estimate(..., extrapolate=True)) are kept only where
+    # the joint energy falls: every trace is non-increasing, every scene the plain iteration
+    # solves is solved, in at most 60 % of the plain iteration's rounds over the scenes (many
+    # outliers hold the plain iteration back: their auxiliary points are their predictions).
+    rounds = {False: 0, True: 0}
+    for seed in range(50_000, 50_020):
+        errors = {}
+        for extrapolate in (False, True):
+            rng = np.random.default_rng(seed)
+            scene = point_scene(rng, 400, outlier_fraction=outlier_fraction)
+            h0 = displace_homography(scene.homography, 8.0, rng)
+            est = TwoStep.from_features(scene.left, scene.right).estimate(
+                h0, EstimatorConfig(), widen=False, extrapolate=extrapolate)
+            assert est.ok
+            trace = est.energy_trace
+            assert np.all(np.diff(trace) <= 1e-9 * trace[0])
+            rounds[extrapolate] += est.iterations
+            errors[extrapolate] = plane_error_px(est.homography, scene.homography,
+                                                 scene.left[scene.on_plane])
+        if errors[False] < 0.5:
+            assert errors[True] < 0.5, seed
+    assert rounds[True] <= 0.6 * rounds[False]
+
+
+def test_only_the_last_stage_of_a_graduated_run_extrapolates():
+    # The wider stages run as the plain iteration's: the same energies up to the last stage.
+    rng = np.random.default_rng(50_100)
+    scene = point_scene(rng, 400, outlier_fraction=0.6)
+    h0 = displace_homography(scene.homography, 20.0, rng)
+    options = EstimatorConfig(potential='geman_mcclure')
+    plain, trial = (TwoStep.from_features(scene.left, scene.right).estimate(
+        h0, options, widen=True, extrapolate=x) for x in (False, True))
+    last = int(plain.stage_trace.max())
+    assert last == 3 and int(trial.stage_trace.max()) == last
+    wide = plain.stage_trace < last
+    assert np.array_equal(trial.energy_trace[:np.count_nonzero(wide)],
+                          plain.energy_trace[wide])
+    # ... and the last stage did take trial steps.
+    assert not np.array_equal(trial.energy_trace, plain.energy_trace)
+
+
 # --- Paper experiment (c): energy decreases, faster for lambda = 0.6 than 0.3.
 @pytest.mark.parametrize('seed', range(4))
 def test_paper_c_energy_decreases_faster_with_larger_lambda(seed):

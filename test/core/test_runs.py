@@ -45,10 +45,12 @@ def _same(a, b):
     assert a.converged == b.converged
 
 
-@pytest.mark.parametrize('potential,widen', [('truncated_quadratic', False),
-                                             ('truncated_quadratic', True),
-                                             ('geman_mcclure', False)])
-def test_a_smaller_tolerance_goes_on_from_the_stop_with_a_fresh_runs_results(potential, widen):
+@pytest.mark.parametrize('potential,widen,extrapolate', [
+    ('truncated_quadratic', False, False), ('truncated_quadratic', True, False),
+    ('geman_mcclure', False, False), ('truncated_quadratic', False, True),
+    ('truncated_quadratic', True, True)])
+def test_a_smaller_tolerance_goes_on_from_the_stop_with_a_fresh_runs_results(potential, widen,
+                                                                             extrapolate):
     short_opts, full_opts = (replace(SHORT, potential=potential),
                              replace(FULL, potential=potential))
     went_on = saved = 0
@@ -56,11 +58,11 @@ def test_a_smaller_tolerance_goes_on_from_the_stop_with_a_fresh_runs_results(pot
         scene, start = _scene(seed)
         fresh_problem = TwoStep.from_features(scene.left, scene.right)
         fresh_calls = _counted(fresh_problem)
-        fresh = fresh_problem.estimate(start, full_opts, widen=widen)
+        fresh = fresh_problem.estimate(start, full_opts, widen=widen, extrapolate=extrapolate)
         problem = TwoStep.from_features(scene.left, scene.right)
-        short = problem.estimate(start, short_opts, widen=widen)
+        short = problem.estimate(start, short_opts, widen=widen, extrapolate=extrapolate)
         calls = _counted(problem)
-        again = problem.estimate(start, full_opts, widen=widen)
+        again = problem.estimate(start, full_opts, widen=widen, extrapolate=extrapolate)
         assert fresh.ok and short.ok and again.ok
         _same(again, fresh)
         if len(set(fresh.stage_trace)) == 1:
@@ -83,6 +85,10 @@ def test_a_larger_tolerance_or_other_settings_run_afresh():
     fresh_other = TwoStep.from_features(scene.left, scene.right).estimate(start, other,
                                                                           widen=False)
     _same(problem.estimate(start, other, widen=False), fresh_other)
+    # A plain run's stop is not an extrapolated run's (and the other way round).
+    fresh_x = TwoStep.from_features(scene.left, scene.right).estimate(start, FULL, widen=False,
+                                                                      extrapolate=True)
+    _same(problem.estimate(start, FULL, widen=False, extrapolate=True), fresh_x)
 
 
 def test_the_same_candidates_are_screened_once(monkeypatch):
