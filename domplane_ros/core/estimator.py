@@ -321,16 +321,19 @@ class TwoStep:
         """Return the extrapolation's trial step after a round, and the next ``beta``.
 
         The round moved ``h_before`` to ``h`` (its predictions at most ``move`` px). The trial
-        ``h + beta (h - h_before)``, ``beta`` capped so that it moves the predictions at most
-        :data:`EXTRAPOLATE_MAX_MOVE_PX`, is ``(h, pred, (r, idx, aux, penalty, energy,
-        closest))`` after its local step; None (and ``beta`` back to 1) where it is not finite
-        or does not lower the joint ``energy``.
+        ``h + beta (h - h_before)``, ``beta`` capped so that it moves the predictions about
+        :data:`EXTRAPOLATE_MAX_MOVE_PX` at most (to first order), is ``(h, pred, (r, idx, aux,
+        penalty, energy, closest))`` after its local step; None (and ``beta`` back to 1) where
+        it is not finite, maps a row to infinity or does not lower the joint ``energy``.
         """
         if move > 0.0:
             beta = min(beta, EXTRAPOLATE_MAX_MOVE_PX / move)
         trial = h + beta * (h - h_before)
         if not np.all(np.isfinite(trial)):
             return None, 1.0
+        w = self.src_h @ trial[2]
+        if w.size and np.abs(w).min() < MIN_W:
+            return None, 1.0  # a row at infinity: the global step could not move from there
         pred = self.apply(trial)
         if not np.all(np.isfinite(pred)):
             return None, 1.0
@@ -463,12 +466,15 @@ class TwoStep:
                 after a cut that passed the verification). Other potentials ignore it.
             extrapolate: Follow the last stage's rounds by extrapolated trial steps, kept
                 where they lower the energy (:data:`EXTRAPOLATE_FROM`): fewer rounds where
-                most features are outliers, at another minimum now and then. Only with
-                ``widen`` given.
+                most features are outliers, at another minimum now and then. Not with
+                ``widen`` None for a potential that can widen (the near/far choice).
 
         Returns:
             :class:`PlaneEstimate`, or :class:`FailedEstimate` for a singular or non-finite
             ``init`` or result, or too few inliers.
+
+        Raises:
+            ValueError: If ``extrapolate`` is asked for the near/far choice.
 
         """
         reason = check_homography(init)
@@ -478,7 +484,9 @@ class TwoStep:
         if not can_widen(options) or widen is not None:
             return self._estimate_from(h, options, can_widen(options) and bool(widen),
                                        extrapolate)
-        assert not extrapolate, 'extrapolate needs widen given'
+        if extrapolate:
+            raise ValueError('extrapolate needs widen given (True or False) for potential '
+                             f'{options.potential!r}')
         nearness = self.start_nearness(h, options.threshold_px)
         plain = None if nearness == 'far' else self._estimate_from(h, options, False)
         if nearness == 'near' and plain.ok:

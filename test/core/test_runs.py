@@ -85,6 +85,8 @@ def test_a_larger_tolerance_or_other_settings_run_afresh():
     fresh_other = TwoStep.from_features(scene.left, scene.right).estimate(start, other,
                                                                           widen=False)
     _same(problem.estimate(start, other, widen=False), fresh_other)
+    with pytest.raises(ValueError, match='extrapolate needs widen'):
+        problem.estimate(start, FULL, extrapolate=True)
     # A plain run's stop is not an extrapolated run's (and the other way round).
     fresh_x = TwoStep.from_features(scene.left, scene.right).estimate(start, FULL, widen=False,
                                                                       extrapolate=True)
