@@ -355,7 +355,7 @@ def _cell_index(coordinate: np.ndarray, origin: float, cell: float, last: int) -
 class PriorSearch:
     """The prior search over one feature set: screen every candidate, refine the best.
 
-    One search serves :func:`~domplane_ros.core.estimator.estimate_plane` (the best
+    One search serves :func:`~domplane_ros.core.plane.estimate_plane` (the best
     ``prior.refine_best`` at once) and the pipeline (a few per frame, new features each
     frame). The feature set's search structures (the right points' KD-tree, the line matcher,
     the refiner) live in ``problem``, built once and shared by the screening and every

@@ -53,8 +53,8 @@ from domplane_ros.core.ground_slope import (ground_roll_deg, ground_slope_range,
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, AgreementMaps, PlaneVerification,
                                             REASON_LOW_SUPPORT, updated,
-                                            VerificationConfig, verify_plane, working_pair,
-                                            WorkingPair)
+                                            VerificationConfig, verify_plane, working_pair)
+from domplane_ros.core.working_pair import WorkingPair
 from domplane_ros.stream.coarse_planes import CoarsePlanes
 from domplane_ros.stream.near_field import (MIN_SWAPPED_GROUND, near_field_refusal,
                                             swapped_ground_share)

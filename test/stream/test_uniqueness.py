@@ -12,8 +12,8 @@ import math
 
 from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner
-from domplane_ros.core.estimator import estimate_plane
 from domplane_ros.core.features import detect_corners
+from domplane_ros.core.plane import estimate_plane
 from domplane_ros.core.verification import verify_plane
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import (camera_response, plane_error_px, random_rig_error, rough_rig,
