@@ -250,7 +250,7 @@ class PlaneVerification:
         middle_score: The score over the band between the two, as ``bottom_score``, [0, 1].
             One surface explains a band between two bands it explains; a plane through a far
             wall that explains the bottom only by aliasing a periodic floor does not (see
-            ``stream/trust.py``, ``MIN_MIDDLE_SHARE``).
+            ``stream/ground_rules.py``, ``MIN_MIDDLE_SHARE``).
         middle_texture: The middle band's share of the region's textured pixels (each
             weighted as in the score), [0, 1]: how much ``middle_score`` rests on.
     """
