@@ -41,9 +41,9 @@ from domplane_ros.core.lines import (as_segments, endpoints, LineMatcher, lines_
                                      screen_line_candidates, segment_lengths)
 from domplane_ros.core.nearest import NearestPoints
 from domplane_ros.core.potentials import make_potential, Potential
-from domplane_ros.core.prior import best_screened, screen_candidates
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.runs import RunRecord, StageEnd, StageState
+from domplane_ros.core.screening import best_screened, screen_candidates
 from domplane_ros.core.stages import can_widen, gnc_scales
 import numpy as np
 from scipy.spatial import cKDTree
@@ -519,7 +519,7 @@ class TwoStep:
     def screening_energy(self, candidates: np.ndarray, threshold_px: float) -> np.ndarray:
         """Return (M,) truncated closest-feature energies of candidate homographies.
 
-        Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.core.prior.screen_candidates`),
+        Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.core.screening.screen_candidates`),
         segments the same with the closest-line distance, weighted by the line weight.
 
         Args:
@@ -543,7 +543,7 @@ class TwoStep:
                       ) -> np.ndarray:
         """Return the indices of the ``count`` candidates of lowest screening energy.
 
-        Points alone: :func:`domplane_ros.core.prior.best_screened` (a strided coarse pass,
+        Points alone: :func:`domplane_ros.core.screening.best_screened` (a strided coarse pass,
         an exact pass over a short list); with segments, the best of
         :meth:`screening_energy`.
 
