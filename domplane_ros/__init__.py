@@ -5,8 +5,9 @@ and :func:`prior_candidates` (candidate homographies from the camera set-up rang
 """
 
 from domplane_ros.config import EstimatorConfig, PlaneNodeConfig, PriorConfig
-from domplane_ros.core.estimator import estimate_plane, FailedEstimate, PlaneEstimate
+from domplane_ros.core.plane import estimate_plane
 from domplane_ros.core.prior import plane_homography, prior_candidates
+from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 
 __all__ = [
     'EstimatorConfig', 'FailedEstimate', 'PlaneEstimate', 'PlaneNodeConfig', 'PriorConfig',

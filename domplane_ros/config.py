@@ -26,7 +26,7 @@ __all__ = [
     'ImageConfig', 'MaskConfig', 'PARAMETERS', 'PARAMETERS_BY_NAME', 'ParamSpec', 'PipelineConfig',
     'PlaneNodeConfig', 'POTENTIAL_NAMES', 'PriorConfig', 'SyncConfig', 'TrackingConfig',
     'TransportConfig', 'VerificationSettings', 'check_value', 'default_params_yaml',
-    'flatten_params', 'load_params_file', 'one_shot_search', 'parameters_markdown',
+    'flatten_params', 'one_shot_search', 'parameters_markdown',
     'unknown_parameter_message',
 ]
 
@@ -342,28 +342,3 @@ def one_shot_search(config: PlaneNodeConfig) -> PlaneNodeConfig:
     per_frame = max(config.pipeline.search_candidates_per_frame, config.prior.refine_best)
     return replace(config, pipeline=replace(config.pipeline,
                                             search_candidates_per_frame=per_frame))
-
-
-def load_params_file(path: str, node_name: str = 'plane_node') -> PlaneNodeConfig:
-    """Read a ROS 2 parameters YAML file through the guarded reader and validate it.
-
-    Accepts ``plane_node: ros__parameters:``, ``/plane_node: ...`` and ``/**: ...`` blocks
-    (merged, wildcards first); see :mod:`domplane_ros.params_file` for every check (size,
-    aliases, structure) made before the file is used.
-
-    Args:
-        path: Path to the YAML file.
-        node_name: The node whose blocks are read.
-
-    Returns:
-        The validated configuration.
-
-    Raises:
-        ConfigError: If the file cannot be read or parsed, is too large, uses an alias, is
-            not shaped as a parameters file, has no block for the node, or holds an invalid
-            parameter; the message is one line and names the problem.
-
-    """
-    from domplane_ros.params_file import read_node_params
-
-    return PlaneNodeConfig.from_ros_params(read_node_params(path, node_name))

@@ -29,7 +29,9 @@ import os
 import stat
 from typing import Any, Iterable, Mapping
 
+from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.errors import clip_text, ConfigError
+from domplane_ros.parameters import flatten_params
 import yaml
 
 MAX_PARAMS_FILE_BYTES = 1_000_000
@@ -227,9 +229,6 @@ def read_node_params(path: str | os.PathLike[str], node_name: str = 'plane_node'
         ConfigError: On any problem named in the module docstring; one line.
 
     """
-    from domplane_ros.config import PlaneNodeConfig
-    from domplane_ros.parameters import flatten_params
-
     name = repr(str(path))
     blocks = parameter_blocks(read_yaml(path), name)
     mine = [(block, params) for block, params in blocks if applies_to(block, node_name)]
@@ -329,4 +328,28 @@ def _size(n_bytes: int) -> str:
 
 
 __all__ = ['MAX_PARAMS_FILE_BYTES', 'MAX_YAML_DEPTH', 'MAX_YAML_NODES', 'applies_to',
-           'parameter_blocks', 'read_node_params', 'read_yaml', 'ros_params_files']
+           'load_params_file', 'parameter_blocks', 'read_node_params', 'read_yaml',
+           'ros_params_files']
+
+
+def load_params_file(path: str, node_name: str = 'plane_node') -> PlaneNodeConfig:
+    """Read a ROS 2 parameters YAML file through the guarded reader and validate it.
+
+    Accepts ``plane_node: ros__parameters:``, ``/plane_node: ...`` and ``/**: ...`` blocks
+    (merged, wildcards first); see the module docstring for every check (size,
+    aliases, structure) made before the file is used.
+
+    Args:
+        path: Path to the YAML file.
+        node_name: The node whose blocks are read.
+
+    Returns:
+        The validated configuration.
+
+    Raises:
+        ConfigError: If the file cannot be read or parsed, is too large, uses an alias, is
+            not shaped as a parameters file, has no block for the node, or holds an invalid
+            parameter; the message is one line and names the problem.
+
+    """
+    return PlaneNodeConfig.from_ros_params(read_node_params(path, node_name))

@@ -5,8 +5,8 @@ from __future__ import annotations
 from pathlib import Path
 import re
 
-from domplane_ros.config import (default_params_yaml, load_params_file, parameters_markdown,
-                                 PlaneNodeConfig)
+from domplane_ros.config import default_params_yaml, parameters_markdown, PlaneNodeConfig
+from domplane_ros.params_file import load_params_file
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / 'README.md'

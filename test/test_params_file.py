@@ -12,10 +12,11 @@ import os
 from pathlib import Path
 import time
 
-from domplane_ros.config import load_params_file, PlaneNodeConfig
+from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.errors import ConfigError
-from domplane_ros.params_file import (applies_to, MAX_PARAMS_FILE_BYTES, MAX_YAML_DEPTH,
-                                      MAX_YAML_NODES, read_node_params, ros_params_files)
+from domplane_ros.params_file import (applies_to, load_params_file, MAX_PARAMS_FILE_BYTES,
+                                      MAX_YAML_DEPTH, MAX_YAML_NODES, read_node_params,
+                                      ros_params_files)
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]

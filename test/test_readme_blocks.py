@@ -27,7 +27,7 @@ import signal
 import subprocess
 import sys
 
-from domplane_ros.config import load_params_file
+from domplane_ros.params_file import load_params_file
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,7 +1,7 @@
 """The warm-start basin: how near a start looks, and the multi-start of a far one.
 
 A warm start 20 px off at the image corners is outside the plain truncated quadratic's basin;
-graduating its scale (:func:`domplane_ros.core.estimator.gnc_scales`) widens the basin, but on
+graduating its scale (:func:`domplane_ros.core.stages.gnc_scales`) widens the basin, but on
 clustered point sets one graduated run still slides into a wrong plane in about 5-10 % of
 the scenes, and the far-start test alone missed a fifth of the sparse or 30 %-missing sets'
 far starts (partly aligned: a start whose corners move 20 px in random directions is right

@@ -30,27 +30,25 @@ and every step lowers it, so the same monotonicity holds.
 
 from __future__ import annotations
 
-from dataclasses import replace
 from typing import Any
 
-from domplane_ros.config import EstimatorConfig, PriorConfig
+from domplane_ros.config import EstimatorConfig
 from domplane_ros.core.basin import far_start, start_nearness
-from domplane_ros.core.homography import (apply_homography, as_homography, as_points,
+from domplane_ros.core.homography import (apply_homography, as_points,
                                           check_homography, MIN_W, normalise_scale,
                                           NormalisedRefiner, point_set_reason)
 from domplane_ros.core.lines import (as_segments, endpoints, LineMatcher, lines_reason,
                                      screen_line_candidates, segment_lengths)
 from domplane_ros.core.nearest import NearestPoints
 from domplane_ros.core.potentials import make_potential, Potential
-from domplane_ros.core.prior import (best_screened, prior_candidates, PriorSearch,
-                                     screen_candidates)
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
 from domplane_ros.core.runs import RunRecord, StageEnd, StageState
+from domplane_ros.core.screening import best_screened, screen_candidates
+from domplane_ros.core.stages import can_widen, gnc_scales
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ['FailedEstimate', 'PlaneEstimate', 'TwoStep', 'can_widen', 'estimate_plane',
-           'gnc_scales']
+__all__ = ['FailedEstimate', 'PlaneEstimate', 'TwoStep']
 
 _GLOBAL_STEP_ITERATIONS = 1
 _POLISH_ROUNDS = 2
@@ -74,57 +72,6 @@ OVER_RELAXATION = 0.5
 # 3661 -> 1633 rounds, 1.7 x less time, 26 of 170 planes more than 1 px elsewhere.
 EXTRAPOLATE_FROM = 2
 EXTRAPOLATE_MAX_MOVE_PX = 1.0
-
-
-def _options(options: EstimatorConfig | None, overrides: dict[str, Any]) -> EstimatorConfig:
-    base = options if options is not None else EstimatorConfig()
-    return replace(base, **overrides) if overrides else base
-
-
-# Potentials whose scale is always graduated (GNC): from ``gnc_start_px`` down to the
-# threshold.
-GRADUATED = ('geman_mcclure',)
-# Potentials graduated only from a warm start that does not look near (`core/basin.py`).
-# Graduating the truncated quadratic always widens its basin on point sets (0 % -> 95-100 %
-# converged from 20 px corner displacements, spread, clustered, half off-plane, 30 % missing,
-# sparse) but from the prior's candidates and from good starts on rendered pairs its wide
-# stages slide into periodic look-alikes (cold start solved 73 % -> 47 %, planks 64 % -> 21 %,
-# one run on seeds 0-29): so only a far warm start is graduated.
-GRADUATED_WHEN_FAR = ('truncated_quadratic',)
-
-
-def can_widen(options: EstimatorConfig) -> bool:
-    """Return whether a far start graduates the potential of ``options`` (see ``widen``).
-
-    Only the potentials of ``GRADUATED_WHEN_FAR``, and only with ``gnc_start_px`` at least
-    twice the threshold (a threshold near the start scale is wide already).
-    """
-    return (options.potential in GRADUATED_WHEN_FAR
-            and options.gnc_start_px >= 2.0 * options.threshold_px)
-
-
-def gnc_scales(options: EstimatorConfig, far: bool = False) -> list[float]:
-    """Return the scales (pixels) of the stages: one for convex potentials, several for GNC.
-
-    Args:
-        options: Estimator settings.
-        far: The start looks far: the potentials of ``GRADUATED_WHEN_FAR`` are graduated too.
-
-    Returns:
-        Decreasing scales ending at ``options.threshold_px``.
-
-    """
-    graduated = options.potential in GRADUATED or (far and
-                                                   options.potential in GRADUATED_WHEN_FAR)
-    if not graduated or options.gnc_start_px <= options.threshold_px:
-        return [options.threshold_px]
-    scales = []
-    s = options.gnc_start_px
-    while s > options.threshold_px * 1.0001:
-        scales.append(s)
-        s *= options.gnc_factor
-    scales.append(options.threshold_px)
-    return scales
 
 
 class TwoStep:
@@ -572,7 +519,7 @@ class TwoStep:
     def screening_energy(self, candidates: np.ndarray, threshold_px: float) -> np.ndarray:
         """Return (M,) truncated closest-feature energies of candidate homographies.
 
-        Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.core.prior.screen_candidates`),
+        Points cost ``sum min(d, t)^2`` (:func:`domplane_ros.core.screening.screen_candidates`),
         segments the same with the closest-line distance, weighted by the line weight.
 
         Args:
@@ -596,7 +543,7 @@ class TwoStep:
                       ) -> np.ndarray:
         """Return the indices of the ``count`` candidates of lowest screening energy.
 
-        Points alone: :func:`domplane_ros.core.prior.best_screened` (a strided coarse pass,
+        Points alone: :func:`domplane_ros.core.screening.best_screened` (a strided coarse pass,
         an exact pass over a short list); with segments, the best of
         :meth:`screening_energy`.
 
@@ -619,60 +566,3 @@ def _points_reason(left: np.ndarray, right: np.ndarray) -> str:
     if not (np.all(np.isfinite(left)) and np.all(np.isfinite(right))):
         return 'points have non-finite coordinates'
     return point_set_reason(left, 'left') or point_set_reason(right, 'right')
-
-
-def estimate_plane(left_points: Any, right_points: Any, init: Any = None,
-                   options: EstimatorConfig | None = None, *,
-                   prior: PriorConfig | None = None,
-                   image_size: tuple[int, int] | None = None,
-                   left_lines: Any = None, right_lines: Any = None,
-                   **overrides: Any) -> PlaneEstimate | FailedEstimate:
-    """Estimate the dominant plane's homography from two feature sets without correspondences.
-
-    The features are points, line segments, or both (a joint energy in which a segment
-    weighs ``options.line_weight`` times a point).
-
-    Args:
-        left_points: (N, 2) float64 left image points (x, y); None or (0, 2) with lines only.
-        right_points: (M, 2) float64 right image points.
-        init: Optional (3, 3) (or 9 values, row-major) initial homography: the warm start.
-            Without it, candidates from ``prior`` are screened and the best few iterated.
-        options: Estimator settings; keyword ``overrides`` (e.g. ``potential='huber'``,
-            ``lambda_weight=0.3``, ``threshold_px=2.0``, ``max_iterations=50``,
-            ``line_weight=0.5``) replace fields of it.
-        prior: Camera set-up ranges, used when ``init`` is None (defaults to
-            ``PriorConfig()``).
-        image_size: ``(width, height)`` of the left image, needed with the prior (principal
-            point at its centre).
-        left_lines: Optional (K, 4) float64 left segments ``(x1, y1, x2, y2)``
-            (:func:`domplane_ros.core.lines.detect_lines`).
-        right_lines: Optional (L, 4) float64 right segments.
-        **overrides: Fields of :class:`~domplane_ros.config.EstimatorConfig`.
-
-    Returns:
-        :class:`PlaneEstimate`, or :class:`FailedEstimate` with the reason (too few,
-        repeated, collinear or non-finite points; fewer than 4 segments or segments all
-        concurrent or parallel; a singular initial homography; too few inliers).
-
-    Raises:
-        ValueError: If the arrays do not have shape (N, 2) (points) or (N, 4) (segments),
-            ``init`` is not 3x3, an override is invalid, or neither ``init`` nor
-            ``image_size`` is given.
-
-    """
-    options = _options(options, overrides)
-    if init is None and image_size is None:
-        raise ValueError('give an initial homography (init) or the image_size for the prior')
-    problem = TwoStep.from_features(left_points, right_points, left_lines, right_lines,
-                                    options.line_weight)
-    if isinstance(problem, FailedEstimate):
-        return problem
-    if init is not None:
-        return problem.estimate(as_homography(init, 'init'), options)
-    prior = prior or PriorConfig()
-    search = PriorSearch(problem, prior_candidates(prior, *image_size),
-                         prior.screen_threshold_px)
-    order = search.ranked()[:prior.refine_best]
-    best, _ = search.refine(order, options)
-    assert best is not None
-    return replace(best, candidates_tried=len(order)) if best.ok else best

@@ -277,7 +277,7 @@ def screen_line_candidates(candidates: np.ndarray, left_segments: np.ndarray,
 
     The energy of a candidate is ``sum_i min(D_i, t)^2`` with ``D_i`` the distance of the
     predicted left segment ``i`` to its closest right line, the line analogue of
-    :func:`domplane_ros.core.prior.screen_candidates`. Only the :data:`SCREEN_SEGMENTS` longest
+    :func:`domplane_ros.core.screening.screen_candidates`. Only the :data:`SCREEN_SEGMENTS` longest
     segments take part (the ranking needs no more, and the search is the cost).
 
     Args:

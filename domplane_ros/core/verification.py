@@ -93,9 +93,10 @@ from typing import Any, Callable, Sequence
 
 import cv2
 from domplane_ros.core.features import check_roi
-from domplane_ros.core.homography import as_valid_homography, resize_homography
+from domplane_ros.core.homography import as_valid_homography
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.later import Later, MeasuredWhenRead
+from domplane_ros.core.working_pair import shrink_pair, WorkingPair
 import numpy as np
 
 # Probe directions (the plane moved in the right image; sideways first, then up and down).
@@ -113,19 +114,11 @@ PEAK_PROBES = ((1.0, 0.0), (-1.0, 0.0))
 # False: the old test.
 EXACT_COVERAGE = True
 _FULLY_COVERED = 1.0 - 1e-4
-# With EXACT_COVERAGE, the right image's no-data border counts as outside it too: the pixels
-# of value exactly 0 (at the working scale, after the shrink) connected to the image's edge,
-# grown by NO_DATA_GROW_PX working pixels over the values the shrink mixed with them (each
-# pyrDown's 5-tap kernel reaches 1 pixel of its output, the chain 1 + 1/2 + 1/4 + ... < 2;
-# grown by 1, the real rough rig 26001 below kept its road at 0.20). A warp
-# or a rectification with alpha > 0 leaves such a border where the camera's image has no data
-# (the evaluation's rig errors warp the right image so: tools/evaluation/real_rigs.py,
-# sim/rigs.py); a left pixel mapped onto it cannot be seen by both cameras, and counting it
-# against the plane refused the true road of real rough rigs (docs/BENCHMARKS.md rounds 30-31).
-# Dark scene clipped to 0 along the edge counts alike: it is flat in the right image, so no
-# plane could be verified on it. False: the image's frame alone, as before session 26.
+# With EXACT_COVERAGE, the right image's no-data border counts as outside it too
+# (:func:`~domplane_ros.core.working_pair.no_data_valid`: exact zeros connected to its edge, as
+# a warp or a rectification with alpha > 0 leaves; docs/BENCHMARKS.md rounds 30-31). False:
+# the image's frame alone, as before session 26.
 NO_DATA_BORDER = True
-NO_DATA_GROW_PX = 2
 
 # The lowest share of the region's rows over which PlaneVerification.bottom_score is measured.
 BOTTOM_BAND = 1.0 / 3.0
@@ -257,7 +250,7 @@ class PlaneVerification:
         middle_score: The score over the band between the two, as ``bottom_score``, [0, 1].
             One surface explains a band between two bands it explains; a plane through a far
             wall that explains the bottom only by aliasing a periodic floor does not (see
-            ``stream/trust.py``, ``MIN_MIDDLE_SHARE``).
+            ``stream/ground_rules.py``, ``MIN_MIDDLE_SHARE``).
         middle_texture: The middle band's share of the region's textured pixels (each
             weighted as in the score), [0, 1]: how much ``middle_score`` rests on.
     """
@@ -282,51 +275,6 @@ class PlaneVerification:
 
 def _check_roi(roi: Sequence[float] | None) -> tuple[float, float, float, float]:
     return (0.0, 0.0, 1.0, 1.0) if roi is None else check_roi(roi)
-
-
-def _shrink(image: np.ndarray, width: int, level: tuple[np.ndarray, int] | None = None
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Return the image at ``width`` columns (never enlarged) and its (3, 3) pixel map.
-
-    Halves with ``cv2.pyrDown`` (Gaussian, cheaper than area averaging at 640 x 480) while the
-    image is at least twice as wide as asked, then area-averages the rest of the way. A
-    ``level`` ``(image L times pyrDown-ed, L)`` that this chain passes through is started
-    from instead of halving the full image again (the same pixels: the same calls).
-    """
-    pixel_map = np.eye(3)
-    if level is not None and level[1] > 0 and _halvings(image.shape[1], width) >= level[1]:
-        start, times = level
-        if start.shape != _halved_shape(image.shape, times):
-            raise ValueError(f'a pyramid level {times} of a {image.shape} image has shape '
-                             f'{_halved_shape(image.shape, times)}, not {start.shape}')
-        image = start
-        pixel_map = np.diag([0.5 ** times, 0.5 ** times, 1.0])
-    while image.shape[1] >= 2 * width:
-        image = cv2.pyrDown(image)
-        # pyrDown centres output pixel i on input pixel 2 i.
-        pixel_map = np.diag([0.5, 0.5, 1.0]) @ pixel_map
-    height, full_w = image.shape
-    if full_w > width:
-        new_h = max(1, int(round(height * width / full_w)))
-        image = cv2.resize(image, (width, new_h), interpolation=cv2.INTER_AREA)
-        pixel_map = resize_homography(width / full_w, new_h / height) @ pixel_map
-    return image, pixel_map
-
-
-def _halvings(full_width: int, width: int) -> int:
-    """Return how many times :func:`_shrink` halves an image ``full_width`` wide."""
-    count = 0
-    while full_width >= 2 * width:
-        full_width, count = (full_width + 1) // 2, count + 1
-    return count
-
-
-def _halved_shape(shape: tuple[int, ...], times: int) -> tuple[int, ...]:
-    """Return the shape of ``cv2.pyrDown`` applied ``times`` times to an image of ``shape``."""
-    height, width = shape[:2]
-    for _ in range(times):
-        height, width = (height + 1) // 2, (width + 1) // 2
-    return (height, width) + tuple(shape[2:])
 
 
 @dataclass(frozen=True)
@@ -372,30 +320,6 @@ def _ncc(a: np.ndarray, mean_a: np.ndarray, var_a: np.ndarray, b: np.ndarray,
     return cv2.divide(cov, denom)
 
 
-@dataclass(frozen=True)
-class WorkingPair:
-    """A pair shrunk to a verification's working width, to verify several planes on it.
-
-    Attributes:
-        left: (h, w) uint8 left image at the working width.
-        left_map: (3, 3) pixel map from the full left image to ``left``.
-        right: (h', w') uint8 right image at the working width.
-        right_map: (3, 3) pixel map from the full right image to ``right``.
-        full_shape: (H, W) of the full images.
-        width: The working width it was made for.
-        right_valid: (h', w') float32 1 where ``right`` has data, 0 on its no-data border
-            (:data:`NO_DATA_BORDER`); None: every pixel.
-    """
-
-    left: np.ndarray
-    left_map: np.ndarray
-    right: np.ndarray
-    right_map: np.ndarray
-    full_shape: tuple[int, int]
-    width: int
-    right_valid: np.ndarray | None = None
-
-
 def working_pair(left: np.ndarray, right: np.ndarray,
                  config: VerificationConfig = VerificationConfig(),
                  levels: tuple[np.ndarray, np.ndarray, int] | None = None) -> WorkingPair:
@@ -422,34 +346,8 @@ def working_pair(left: np.ndarray, right: np.ndarray,
 
 def _working(left: np.ndarray, right: np.ndarray, config: VerificationConfig,
              levels: tuple[np.ndarray, np.ndarray, int] | None = None) -> WorkingPair:
-    left_level = right_level = None
-    if levels is not None:
-        left_level, right_level = (levels[0], levels[2]), (levels[1], levels[2])
-    left_small, scale_left = _shrink(left, config.working_width_px, left_level)
-    right_small, scale_right = _shrink(right, int(round(
-        config.working_width_px * right.shape[1] / left.shape[1])), right_level)
-    return WorkingPair(left_small, scale_left, right_small, scale_right,
-                       (int(left.shape[0]), int(left.shape[1])), int(config.working_width_px),
-                       no_data_valid(right_small) if NO_DATA_BORDER and EXACT_COVERAGE else None)
-
-
-def no_data_valid(image: np.ndarray) -> np.ndarray | None:
-    """Return (h, w) float32 1 where ``image`` has data, 0 on its no-data border; None if none.
-
-    See :data:`NO_DATA_BORDER`: the pixels of value exactly 0 connected (4-neighbours) to the
-    image's edge, grown by :data:`NO_DATA_GROW_PX`.
-    """
-    zero = (image == 0).astype(np.uint8)
-    if not (zero[0].any() or zero[-1].any() or zero[:, 0].any() or zero[:, -1].any()):
-        return None
-    _, labels = cv2.connectedComponents(zero, connectivity=4)
-    edge = np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0], labels[:, -1]]))
-    edge = edge[edge > 0]
-    border = np.isin(labels, edge).astype(np.uint8)
-    if NO_DATA_GROW_PX > 0:
-        side = 2 * NO_DATA_GROW_PX + 1
-        border = cv2.dilate(border, np.ones((side, side), np.uint8))
-    return (1 - border).astype(np.float32)
+    return shrink_pair(left, right, config.working_width_px, levels,
+                       no_data=NO_DATA_BORDER and EXACT_COVERAGE)
 
 
 def _maps(left: np.ndarray, right: np.ndarray, hom: np.ndarray, config: VerificationConfig,

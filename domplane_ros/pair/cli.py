@@ -38,11 +38,11 @@ import tempfile
 from typing import Sequence
 
 import cv2
-from domplane_ros.config import (check_value, ConfigError, load_params_file, one_shot_search,
-                                 PARAMETERS_BY_NAME, PlaneNodeConfig)
+from domplane_ros.config import (check_value, ConfigError, one_shot_search, PARAMETERS_BY_NAME,
+                                 PlaneNodeConfig)
 from domplane_ros.core.legend import with_legend
 from domplane_ros.pair.files import image_pairs, ImagePair, PairInputError, read_pair
-from domplane_ros.params_file import node_name_hint
+from domplane_ros.params_file import load_params_file, node_name_hint
 from domplane_ros.stream.frame import debug_overlay, FrameResult
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.status import reason_for_arguments

@@ -65,9 +65,9 @@ import sys
 import time
 from typing import Any, Callable
 
-from domplane_ros.config import load_params_file, PlaneNodeConfig
+from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.errors import BagError, ConfigError
-from domplane_ros.params_file import node_name_hint
+from domplane_ros.params_file import load_params_file, node_name_hint
 from domplane_ros.replay.paths import (create_output, missing_folders, remove_empty_folders,
                                        RunPaths)
 from domplane_ros.replay.reader import (BagInput, BagReadError, CAMERA_INFO, describe_error,

@@ -14,11 +14,12 @@ import math
 import time
 
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.core.estimator import can_widen, TwoStep
+from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import detect_corners, Features
 from domplane_ros.core.image import check_gray
 from domplane_ros.core.pyramid import WorkingImage
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
+from domplane_ros.core.stages import can_widen
 from domplane_ros.core.verification import REASON_LOW_SUPPORT
 from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, PHOTOMETRIC

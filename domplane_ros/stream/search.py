@@ -27,10 +27,11 @@ from domplane_ros.stream.acceptance import AcceptanceChecks
 from domplane_ros.stream.candidates import CandidateWork, photometric_estimate
 from domplane_ros.stream.challenge import NEAR_LOCK_PX
 from domplane_ros.stream.frame import PairStep
+from domplane_ros.stream.ground_rules import weak_below_refusal
 from domplane_ros.stream.health import InputCounts
 from domplane_ros.stream.refusals import Refusal, SEARCH
 from domplane_ros.stream.swap import swap_rivals
-from domplane_ros.stream.trust import TrustGate, weak_below_refusal
+from domplane_ros.stream.trust import TrustGate
 from domplane_ros.stream.verdict import (BEYOND_RIVAL_SHARE, CHALLENGE_MARGIN, TWIN_RIVAL_SHARE,
                                          Verdict)
 import numpy as np
@@ -89,8 +90,8 @@ AMBIGUOUS_SIBLINGS = True
 # The reason of a pick ambiguous between planes of this head (Uniqueness.ground_winner).
 AMBIGUOUS_DISTINCT = 'ambiguous: a distinct plane'
 # Refuse a finished winner verified with less than full confidence that leaves more than
-# trust.MAX_BELOW_FRACTION_WEAK of the texture beyond it (trust.weak_below_refusal; measured
-# there and in docs/BENCHMARKS.md round 17). False: as before round 17.
+# ground_rules.MAX_BELOW_FRACTION_WEAK of the texture beyond it (ground_rules.weak_below_refusal;
+# measured there and in docs/BENCHMARKS.md round 17). False: as before round 17.
 WEAK_BELOW_REFUSAL = True
 
 __all__ = ['PlaneSearch', 'propagate']
@@ -532,7 +533,8 @@ def _finish_refusal(verdict: Verdict) -> str:
     """Return why a finished winner is refused ('' if not): a better refused plane, weak evidence.
 
     :func:`_beyond_refusal`, :func:`_twin_refusal`, then
-    :func:`~domplane_ros.stream.trust.weak_below_refusal` (only if :data:`WEAK_BELOW_REFUSAL`).
+    :func:`~domplane_ros.stream.ground_rules.weak_below_refusal` (only if
+    :data:`WEAK_BELOW_REFUSAL`).
     """
     return (_beyond_refusal(verdict) or _twin_refusal(verdict)
             or (weak_below_refusal(verdict) if WEAK_BELOW_REFUSAL else ''))

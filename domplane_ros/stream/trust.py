@@ -36,8 +36,10 @@ siblings (:meth:`~domplane_ros.stream.coarse_planes.CoarsePlanes.siblings`, the 
 by its texture's repeats): on a checkerboard a look-alike some squares off wins only if it
 explains clearly more than they do (and it must be one plane, unique in its own region:
 :meth:`~domplane_ros.stream.uniqueness.Uniqueness.any_winner`). A plane that explains too
-little of the image may still be verified by its own region (:func:`own_region_verified`: a
-board covering a fifth of a textured room).
+little of the image may still be verified by its own region
+(:func:`~domplane_ros.stream.ground_rules.own_region_verified`: a board covering a fifth of a
+textured room). What a verified plane must show to be the ground (beyond, bands, slope,
+roll) are the rules of :mod:`domplane_ros.stream.ground_rules`.
 """
 
 from __future__ import annotations
@@ -48,13 +50,13 @@ from typing import Any, Callable, Hashable, Sequence
 
 from domplane_ros.config import MaskConfig, PriorConfig, VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner, CoarseConfig
-from domplane_ros.core.ground_slope import (ground_roll_deg, ground_slope_range,
-                                            prior_slope_bounds, swap_evidence)
+from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.result import PlaneEstimate
 from domplane_ros.core.verification import (agreement_maps, AgreementMaps, PlaneVerification,
-                                            REASON_LOW_SUPPORT, updated,
-                                            VerificationConfig, verify_plane, working_pair,
-                                            WorkingPair)
+                                            updated, VerificationConfig, verify_plane,
+                                            working_pair)
+from domplane_ros.core.working_pair import WorkingPair
+from domplane_ros.stream import ground_rules
 from domplane_ros.stream.coarse_planes import CoarsePlanes
 from domplane_ros.stream.near_field import (MIN_SWAPPED_GROUND, near_field_refusal,
                                             swapped_ground_share)
@@ -85,49 +87,6 @@ MIN_BOTTOM_SCORE = 0.05
 # median above 1), a plane through a far wall or the boxes' faces mostly above it (measured:
 # 0.10, a wall plane on a faint tiled floor, tuning seed 212, 8 px off the floor).
 MIN_BOTTOM_SHARE = 0.25
-# A published plane may have at most this share of the textured image below it
-# (PlaneVerification.below_fraction: texture with less disparity than the plane, beyond it):
-# nothing is seen below the ground. Measured: true planes at most 0.004 on 100 rendered tuning
-# scenes (median 0.0006), 0.018 for a published plane 0.8 px off a faint tiled floor; planes
-# 6-7 px off through the faces of boxes on faint tiled floors (tuning seeds 188, 305) 0.047
-# and 0.052.
-MAX_BELOW_FRACTION = 0.03
-# A search's finished winner (after its polish and photometric refinement) verified with less
-# than full confidence (its score under verification.accept_score) may have at most this share:
-# weak evidence for the plane and texture beyond it make a plane through obstacles, not the
-# floor (:func:`weak_below_refusal`). Not during the pick: an unfinished plane near the floor
-# can leave more beyond it (measured: 0.017 at confidence 0.71, floors_rough tuning seed 25,
-# 0.04 px off once finished). Measured on the published planes of the tuning seeds 0-29 (cold,
-# rough, floors, floors_rough; 118 published, none wrong) and the cold search on every frame
-# of the rough sequence 41 (docs/BENCHMARKS.md round 17): correct planes at most 0.0093
-# (confidence 1) and 0.0074 at confidence 0.69; planes 4.6-5.3 px off through the faces of
-# boxes and the far floor on that rough head (roll +3.7 deg) 0.018-0.024 at confidence
-# 0.50-0.75.
-MAX_BELOW_FRACTION_WEAK = 0.015
-# A published plane that explains at least MIN_OUTER_BAND_SCORE of both the top and the bottom
-# third of the region (PlaneVerification.top_score, bottom_score) must explain at least
-# MIN_MIDDLE_SHARE of the weaker of the two in the band between (middle_score), where that band
-# holds at least MIN_MIDDLE_TEXTURE of the region's texture (middle_texture; a blank middle
-# says nothing): one surface seen from above runs from the bottom of the image up to its far
-# end. Measured on 317 planes
-# published on the tuning seeds 0-59 (cold, rough, lighting, sized floors on a nominal and a
-# rough head, faint tiles): the correct ones at least 0.70 of the weaker band; a plane through
-# a textured far wall that explains the bottom only by aliasing a 16 cm checker (sized floors
-# 10002, 41 px off, top / middle / bottom 0.75 / 0.07 / 0.37) 0.19; planes 1.9 and 2.5 px off
-# a checker under a far wall (sized floors 1, nominal and rough) 0.58 and 0.40 as published
-# (finished); the nominal one was judged at 0.48, 2.7 px off before its finish, just under the
-# half (the rough one's judged figure was not recorded). Such a plane still competes with the
-# winner for uniqueness (it explains the image as much as it does).
-MIN_MIDDLE_SHARE = 0.5
-MIN_OUTER_BAND_SCORE = 0.2
-MIN_MIDDLE_TEXTURE = 0.1
-# With verification.plane any, a plane that explains too little of the image is still
-# verified when it explains at least MIN_REGION_SCORE of the texture of its own region
-# (PlaneVerification.region_score) and that region covers at least MIN_REGION_FRACTION of the
-# image: a board covering a fifth of a textured room. Chosen on the rendered boards' tuning
-# seeds (sim/boards.py, small and lens, 0-129; docs/METHOD.md).
-MIN_REGION_SCORE = 0.8
-MIN_REGION_FRACTION = 0.1
 # A held lock is also held against its reference (TrustGate.lock_reference): the verification
 # of the plane it started from, i.e. the first plane published after a search (a search's
 # finished winner) or a challenger that replaced the lock. A warm plane scoring under
@@ -141,39 +100,6 @@ MIN_REGION_FRACTION = 0.1
 LOCK_REFERENCE = True
 LOCK_REFERENCE_RATIO = 0.7
 LOCK_BOTTOM_RATIO = 0.4
-# A ground plane about to be published (a search's finished winner, a challenger that beats the
-# lock, a warm pair's plane) must have its disparity grow down the image within
-# verification.max_ground_roll_deg degrees (default 10) (ground_roll_deg: the least roll over the
-# prior's focal lengths, with the camera model's vergence and the right camera's roll taken out):
-# the prior's camera model has a level head. Not on a search's unfinished candidates or rivals, and
-# no swap reason. Measured (docs/BENCHMARKS.md round 18): the true floors of the default prior's
-# 6160 rendered set-ups (tuning seeds 0-129, 7000-13029) at most 0.08 deg, 1.41 deg on the same
-# heads as rough rigs; 424 correct planes published on tuning seeds (every single-pair trust case
-# 0-59, and 133 of the 151 floors whose disparity grows 0.020-0.035 px per row) at most 5.5 deg
-# (rough 10159, 0.75 px off); the wrong planes published in ground mode through the panels of a
-# floorless room (sim/boards.py small boards, tuning seeds 0-129 with and without a lens, 13 planes
-# 25-60 px off) 11.8-49 deg on 10, but 0.0-0.6 deg on 3 (planes of the prior's level family): no
-# proof. The default 10 (round 19, review rreview19; 8 in round 18): a left camera rolled 4 deg
-# against the baseline reads up to 8.4 deg on rendered pairs (9.1 with every rough-rig tolerance
-# at its extreme), the least refused wrong plane 12.1 deg.
-# A ground plane about to be published (where its roll and slope are checked, ground_refusal)
-# and verified with less than full confidence (its score under verification.accept_score) must
-# explain the lowest third of the region at least MIN_BOTTOM_OVER_TOP times as well as the
-# highest third (PlaneVerification.bottom_score, top_score), where the highest explains at least
-# MIN_TOP_FOR_BANDS: the ground seen from above is nearest, and best resolved, at the bottom of
-# the image; weak evidence for a plane that explains the top better is a plane through distant
-# structure above the ground (TrustGate.bands_refusal). Round 21 (docs/BENCHMARKS.md), default
-# prior: the three planes published > 5 px off on KITTI 000046 crops (tuning seeds 48-247) ran
-# through trees, poles and the far road above a strip of near road, bottom / top 0.58, 0.19,
-# 0.34 at confidence 0.93, 0.79, 0.99 (a 4.6 px one 0.65); the weak correct planes of that run
-# at least 18, of evaluate_trust's tuning seeds 0-29 (11 of 431 planes) at least 1.01 (conf
-# 0.99, a floor growing 0.057 px per row). At full confidence correct rendered floors read down
-# to 0.33: no rule there. MIN_TOP_FOR_BANDS: a top third explained under it says nothing (the
-# wrong planes above explain 0.29-0.42 of it). 0: off (as before round 21). With the co-visible
-# score (the default since session 20) crop 191's wrong plane scores 0.353 >= accept_score:
-# full confidence, not looked at, published 7.3 px off (review of session 20; docs/METHOD.md).
-MIN_BOTTOM_OVER_TOP = 0.75
-MIN_TOP_FOR_BANDS = 0.1
 # Working width limits of the verification, pixels.
 MIN_WORKING_WIDTH = 64
 MAX_WORKING_WIDTH = 480
@@ -360,7 +286,7 @@ class TrustGate:
                            f'{self.settings.min_score:g})')
         if check.bottom_score < least:
             return Verdict(False, check, bottom, ground=False)
-        verdict = self._one_surface(check) or self._held(check, locked)
+        verdict = ground_rules.one_surface(check) or self._held(check, locked)
         if verdict.accepted and locked:
             # Last: a warm pair's plane is published if accepted (a search's is checked
             # once finished, PlaneSearch; its unfinished candidates never).
@@ -379,6 +305,19 @@ class TrustGate:
         return (self.rolled_refusal(homography, width, height)
                 or self.slope_refusal(homography, width, height)
                 or (self.bands_refusal(check) if check is not None else ''))
+
+    def bands_refusal(self, check: PlaneVerification) -> str:
+        """Return :func:`~domplane_ros.stream.ground_rules.bands_refusal` ('' if none)."""
+        return ground_rules.bands_refusal(check, self.settings)
+
+    def slope_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
+        """Return :func:`~domplane_ros.stream.ground_rules.slope_refusal` ('' if none)."""
+        return ground_rules.slope_refusal(homography, width, height, self.settings, self.prior)
+
+    def rolled_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
+        """Return :func:`~domplane_ros.stream.ground_rules.rolled_refusal` ('' if none)."""
+        return ground_rules.rolled_refusal(homography, width, height, self.settings,
+                                           self.prior)
 
     def near_field_refusal(self, homography: np.ndarray,
                            roi: Sequence[float] | None = None) -> str:
@@ -425,101 +364,6 @@ class TrustGate:
             left, right, float(1 << level), homography, self.mask, self.prior, roi))))
         return share >= MIN_SWAPPED_GROUND
 
-    def bands_refusal(self, check: PlaneVerification) -> str:
-        """Return why a weak ground plane is refused for explaining its top best ('' if not).
-
-        Verified with less than full confidence, it must explain the lowest third of the region
-        at least :data:`MIN_BOTTOM_OVER_TOP` times as well as the highest, where the highest
-        explains at least :data:`MIN_TOP_FOR_BANDS`. Never with ``verification.plane: any``.
-        """
-        if (self.settings.plane == 'any' or MIN_BOTTOM_OVER_TOP <= 0.0
-                or check.confidence >= 1.0 or check.top_score < MIN_TOP_FOR_BANDS
-                or check.bottom_score >= MIN_BOTTOM_OVER_TOP * check.top_score):
-            return ''
-        return ('not the ground: the plane explains '
-                f'{100 * check.top_score:.0f} % of the top of the region but '
-                f'{100 * check.bottom_score:.0f} % of its bottom (< {MIN_BOTTOM_OVER_TOP:g} x) at '
-                f'confidence {check.confidence:.2f} < 1; a plane through distant structure above '
-                'the ground?')
-
-    def slope_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
-        """Return why a ground plane is refused for its disparity slope ('' if not).
-
-        The slope ``(b / h) cos(tilt)``
-        (:func:`~domplane_ros.core.ground_slope.ground_slope_range`, over the prior's focal
-        lengths) must not lie below the least of the prior's range
-        (:func:`~domplane_ros.core.ground_slope.prior_slope_bounds`) divided by
-        ``1 + verification.prior_slope_margin``: a plane through distant structure (almost at
-        infinity: slope near 0) is not that ground. No upper bound: the review of session 19
-        (rslope20) found the default prior's (0.59) refusing the correct ground of low heads
-        with a wide baseline (b/h 0.6-0.8 looking ahead, published under 0.11 px without it),
-        which the search's coarse alignment finds outside the prior, and no wrong plane it
-        refused.
-        Never with ``verification.plane: any`` nor with a margin of 100 (the parameter's
-        greatest: off, as a slope at or below 0 is otherwise refused whatever the margin).
-        """
-        if self.settings.plane == 'any' or self.settings.prior_slope_margin >= 100.0:
-            return ''
-        widen = 1.0 + self.settings.prior_slope_margin
-        least = prior_slope_bounds(self.prior.baseline_over_height, self.prior.tilt_deg)[0]
-        high = ground_slope_range(homography, width, height, self.prior.focal_px,
-                                  self.prior.principal_point_px)[1]
-        if high >= least / widen:
-            return ''
-        return (f'not the ground of the prior: its disparity grows {high:.3f} px per row, less '
-                f'than the least prior.baseline_over_height and prior.tilt_deg allow ({least:.3f}'
-                f' / (1 + verification.prior_slope_margin '
-                f'{self.settings.prior_slope_margin:g})); a plane through distant structure, or '
-                'a prior too narrow?')
-
-    def rolled_refusal(self, homography: np.ndarray, width: int, height: int) -> str:
-        """Return why a ground plane about to be published is refused for its roll ('' if not).
-
-        Its disparity must grow down the image within ``verification.max_ground_roll_deg`` for some
-        focal length of the prior (:func:`~domplane_ros.core.ground_slope.ground_roll_deg`):
-        a level head sees the ground so, a plane through surfaces at several depths and turns
-        (the panels of a room without a floor) mostly not. Only for planes about to be
-        published (a search's finished winner, a challenger, a warm pair's plane); never
-        with ``verification.plane: any``.
-        """
-        bound = self.settings.max_ground_roll_deg
-        if self.settings.plane == 'any' or bound >= 90.0:
-            return ''
-        roll = ground_roll_deg(homography, width, height, self.prior.focal_px,
-                               self.prior.principal_point_px)
-        if abs(roll) <= bound:
-            return ''
-        return (f'not the ground of a level head: its disparity grows {roll:+.0f} deg off '
-                'straight down the image (more than verification.max_ground_roll_deg '
-                f'{bound:g} for every focal length of the prior); a plane through surfaces at '
-                'several depths, or a rolled head?')
-
-    @staticmethod
-    def _one_surface(check: PlaneVerification) -> Verdict | None:
-        """Return the refusal of a verified plane that is not one surface under the head.
-
-        Nothing may lie beyond the ground (:data:`MAX_BELOW_FRACTION`; no rival of the floor,
-        but a search's finished winner must outscore it,
-        :data:`~domplane_ros.stream.verdict.BEYOND_RIVAL_SHARE`), and the ground explains the
-        band between the top and bottom thirds it explains (:data:`MIN_MIDDLE_SHARE`, where
-        that band holds :data:`MIN_MIDDLE_TEXTURE` of the texture; still a rival: a look-alike
-        of the floor). None if neither refuses it.
-        """
-        if check.below_fraction > MAX_BELOW_FRACTION:
-            return Verdict(False, check, 'not the ground: '
-                           f'{100 * check.below_fraction:.0f} % of the textured image lies '
-                           f'beyond the plane (> {100 * MAX_BELOW_FRACTION:.0f} %); a plane '
-                           'through obstacles above the floor?', ground=False, beyond=True)
-        weaker = min(check.top_score, check.bottom_score)
-        if (weaker >= MIN_OUTER_BAND_SCORE and check.middle_texture >= MIN_MIDDLE_TEXTURE
-                and check.middle_score < MIN_MIDDLE_SHARE * weaker):
-            return Verdict(False, check, 'not the ground: the plane explains '
-                           f'{100 * check.top_score:.0f} % of the top and '
-                           f'{100 * check.bottom_score:.0f} % of the bottom of the region but '
-                           f'{100 * check.middle_score:.0f} % between them; a far wall and '
-                           'a periodic floor aliased?')
-        return None
-
     def _judge_any(self, check: PlaneVerification, locked: bool) -> Verdict:
         """Return the verdict of ``verification.plane: any``: no ground or swap checks.
 
@@ -527,13 +371,11 @@ class TrustGate:
         what it explains at the image bottom nor what lies beyond it says anything; the
         verification and the lock's history still do.
         """
-        if not check.accepted and own_region_verified(check):
+        if not check.accepted and ground_rules.own_region_verified(check):
             # A board covering a fifth of a textured room: little of the image's texture, but
             # nearly all of its own region's.
-            confidence = 0.5 + 0.5 * (check.region_score - MIN_REGION_SCORE) / (
-                1.0 - MIN_REGION_SCORE)
             check = updated(check, accepted=True, reason='',
-                            confidence=float(np.clip(confidence, 0.5, 1.0)))
+                            confidence=ground_rules.own_region_confidence(check))
         if not check.accepted:
             return Verdict(False, check, f'plane not verified: {check.reason} (score '
                            f'{check.score:.2f} < verification.min_score '
@@ -688,30 +530,3 @@ class TrustGate:
         """
         return (challenger.accepted
                 and challenger.peak_score > CHALLENGE_MARGIN * lock.peak_score)
-
-
-def own_region_verified(check: PlaneVerification) -> bool:
-    """Return whether a plane refused for its score is verified over its own region.
-
-    ``verification.plane: any`` only: it explains too little of the image
-    (:data:`~domplane_ros.core.verification.REASON_LOW_SUPPORT`) but at least
-    :data:`MIN_REGION_SCORE` of the texture of its own region, which covers at least
-    :data:`MIN_REGION_FRACTION` of the image.
-    """
-    return (check.reason == REASON_LOW_SUPPORT and check.region_score >= MIN_REGION_SCORE
-            and check.region_fraction >= MIN_REGION_FRACTION)
-
-
-def weak_below_refusal(verdict: Verdict) -> str:
-    """Return why a search's finished winner is refused for weak evidence ('' if not).
-
-    Refused: verified with less than full confidence and more than
-    :data:`MAX_BELOW_FRACTION_WEAK` of the textured image beyond it.
-    """
-    check = verdict.verification
-    if check.confidence >= 1.0 or check.below_fraction <= MAX_BELOW_FRACTION_WEAK:
-        return ''
-    return (f'not the ground: {100 * check.below_fraction:.1f} % of the textured image lies '
-            f'beyond the best plane finished (> {100 * MAX_BELOW_FRACTION_WEAK:.1f} % at '
-            f'confidence {check.confidence:.2f} < 1); a plane through obstacles above the '
-            'floor?')

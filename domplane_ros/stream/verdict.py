@@ -39,7 +39,7 @@ BEYOND_RIVAL_SHARE = 1.0
 # Likewise a search's winner, once finished, must score at least this share of every plane of
 # its pick that maps the image bottom as it does (not distinct_planes) and was verified but
 # refused though a ground plane (``Verdict.ground``: in a search only for the band between the
-# top and bottom it explains, trust.MIN_MIDDLE_SHARE; ``Verdict.twin_rival``,
+# top and bottom it explains, ground_rules.MIN_MIDDLE_SHARE; ``Verdict.twin_rival``,
 # stream/search.py): else the winner is a
 # partial fit of a ground that explains the image clearly better (CHALLENGE_MARGIN times) but
 # was refused, and which of the two is the floor cannot be told. Such a plane is no rival for
@@ -68,7 +68,7 @@ class Verdict:
         ground: False for a plane refused as no ground plane (a wall, a plane through boxes
             above the floor): it does not compete with ground planes for uniqueness. A plane
             refused for the band between the top and bottom it explains (a far wall aliasing
-            a periodic floor, ``trust.MIN_MIDDLE_SHARE``) keeps True: a look-alike of the
+            a periodic floor, ``ground_rules.MIN_MIDDLE_SHARE``) keeps True: a look-alike of the
             floor that explains as much still makes the pair ambiguous.
         beyond: Refused (``ground`` False) only for the texture that lies beyond it.
         beyond_rival: The best score of a plane judged beside a search's winner and refused

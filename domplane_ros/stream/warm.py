@@ -16,9 +16,10 @@ from dataclasses import replace
 from typing import Callable
 
 from domplane_ros.config import PlaneNodeConfig
-from domplane_ros.core.estimator import GRADUATED, TwoStep
+from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.homography import check_homography, normalise_scale
 from domplane_ros.core.result import FailedEstimate, PlaneEstimate
+from domplane_ros.core.stages import GRADUATED
 from domplane_ros.stream.candidates import CandidateWork
 from domplane_ros.stream.frame import PairStep
 from domplane_ros.stream.trust import TrustGate

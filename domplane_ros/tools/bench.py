@@ -23,8 +23,8 @@ import time
 
 import cv2
 from domplane_ros.config import EstimatorConfig, PriorConfig
-from domplane_ros.core.estimator import estimate_plane
 from domplane_ros.core.homography import apply_homography
+from domplane_ros.core.plane import estimate_plane
 from domplane_ros.core.potentials import POTENTIALS
 from domplane_ros.sim.synthetic import (displace_homography, plane_error_px, point_scene,
                                         POINT_SET_KINDS)

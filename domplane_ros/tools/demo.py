@@ -30,10 +30,11 @@ import time
 from typing import Any, Sequence
 
 import cv2
-from domplane_ros.config import load_params_file, PlaneNodeConfig
+from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.legend import legend_strip, text_strip
 from domplane_ros.core.mask import overlay
 from domplane_ros.errors import BagError, ConfigError
+from domplane_ros.params_file import load_params_file
 from domplane_ros.replay.cli import run_replay
 from domplane_ros.replay.reader import ReplayedFrame
 from domplane_ros.replay.report import ReplaySummary

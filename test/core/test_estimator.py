@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from domplane_ros.config import EstimatorConfig, PriorConfig
 from domplane_ros.core import basin
-from domplane_ros.core.estimator import (can_widen, estimate_plane, FailedEstimate,
-                                         gnc_scales, PlaneEstimate, TwoStep)
+from domplane_ros.core.estimator import FailedEstimate, PlaneEstimate, TwoStep
 from domplane_ros.core.homography import apply_homography, fit_homography
+from domplane_ros.core.plane import estimate_plane
 from domplane_ros.core.potentials import POTENTIALS
 from domplane_ros.core.prior import plane_homography, prior_candidates, PriorSearch
+from domplane_ros.core.stages import can_widen, gnc_scales
 from domplane_ros.sim.synthetic import (displace_homography, plane_error_px, point_scene,
                                         POINT_SET_KINDS)
 from hypothesis import example, given, HealthCheck, settings, strategies as st

@@ -5,10 +5,11 @@ from __future__ import annotations
 from dataclasses import replace
 
 from domplane_ros.config import FeatureConfig, one_shot_search, PlaneNodeConfig, PriorConfig
-from domplane_ros.core.estimator import estimate_plane, FailedEstimate, PlaneEstimate, TwoStep
+from domplane_ros.core.estimator import FailedEstimate, PlaneEstimate, TwoStep
 from domplane_ros.core.homography import apply_homography
 from domplane_ros.core.lines import (detect_lines, LineMatcher, lines_reason, map_segments,
                                      segment_lengths, segment_lines, UNMATCHED_PX)
+from domplane_ros.core.plane import estimate_plane
 from domplane_ros.core.potentials import POTENTIALS
 from domplane_ros.sim.generators import random_scene, RENDERED_PRIOR
 from domplane_ros.sim.synthetic import (displace_homography, line_scene, plane_error_px,

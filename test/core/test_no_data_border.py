@@ -6,7 +6,7 @@ from pathlib import Path
 
 from domplane_ros.config import one_shot_search, PlaneNodeConfig
 from domplane_ros.core import verification
-from domplane_ros.core.verification import no_data_valid
+from domplane_ros.core.working_pair import NO_DATA_GROW_PX, no_data_valid
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.tools.evaluate_real_rigs import kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
@@ -23,7 +23,7 @@ def test_only_zeros_connected_to_the_edge_are_no_data():
     image[38:, 10:12] = 1  # dark, not zero: data
     valid = no_data_valid(image)
     assert valid.dtype == np.float32 and valid.shape == image.shape
-    grow = verification.NO_DATA_GROW_PX
+    grow = NO_DATA_GROW_PX
     assert not valid[:6 + grow].any()  # the band and the values the shrink mixed with it
     assert valid[6 + grow:].all()  # the black square and the dark pixels are data
     assert no_data_valid(np.full((40, 60), 90, np.uint8)) is None

@@ -6,7 +6,7 @@ import functools
 
 import cv2
 from domplane_ros.config import FeatureConfig, PriorConfig
-from domplane_ros.core import prior
+from domplane_ros.core import prior, screening
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import FAR_PX, MIN_W
 from domplane_ros.sim.generators import random_scene
@@ -41,15 +41,15 @@ def test_the_best_candidates_are_ranked_as_the_exact_energy_ranks_them(seed):
     """
     left, tree = _features(300 + seed)
     candidates = prior.prior_candidates(PriorConfig(), 640, 480)
-    assert candidates.shape[0] > prior.SCREEN_EXACT
-    costs = prior.screen_candidates(candidates, left, tree, 12.0)
+    assert candidates.shape[0] > screening.SCREEN_EXACT
+    costs = screening.screen_candidates(candidates, left, tree, 12.0)
     exact = _exact(candidates, left, tree, 12.0)
     order = np.argsort(costs, kind='stable')[:16]
     np.testing.assert_array_equal(order, np.argsort(exact, kind='stable')[:16])
     np.testing.assert_allclose(costs[order], exact[order], rtol=1e-9)
     # The others rank after every exactly screened one.
-    rest = np.setdiff1d(np.arange(len(costs)), np.argsort(costs)[:prior.SCREEN_EXACT])
-    assert costs[rest].min() > np.sort(costs)[prior.SCREEN_EXACT - 1]
+    rest = np.setdiff1d(np.arange(len(costs)), np.argsort(costs)[:screening.SCREEN_EXACT])
+    assert costs[rest].min() > np.sort(costs)[screening.SCREEN_EXACT - 1]
 
 
 def _reference_screening(candidates, left, tree, threshold):
@@ -74,7 +74,7 @@ def _reference_screening(candidates, left, tree, threshold):
     table[1:-1, 1:-1] = np.minimum(dist, threshold) ** 2
     grid = np.clip(np.rint((pred - (low - cell)) / cell), 0, (cols + 1, rows + 1)).astype(int)
     coarse = np.sum(table[grid[..., 1], grid[..., 0]], axis=1)
-    best = np.argsort(coarse, kind='stable')[:prior.SCREEN_EXACT]
+    best = np.argsort(coarse, kind='stable')[:screening.SCREEN_EXACT]
     costs = coarse + (1.0 + len(left) * threshold ** 2)
     d, _ = tree.query(pred[best].reshape(-1, 2), distance_upper_bound=threshold)
     d = np.minimum(d, threshold).reshape(len(best), -1)
@@ -87,7 +87,7 @@ def test_screening_gives_the_reference_energies_bit_for_bit():
     left, tree = _features(301)
     candidates = prior.prior_candidates(PriorConfig(), 640, 480)
     for cands in (candidates, prior.swapped_candidates(candidates)):
-        costs = prior.screen_candidates(cands, left, tree, 12.0)
+        costs = screening.screen_candidates(cands, left, tree, 12.0)
         reference = _reference_screening(cands, left, tree, 12.0)
         np.testing.assert_array_equal(costs, reference)
         # A wrong cell index (x and y exchanged) would change the best starts: checked too.
@@ -102,10 +102,10 @@ def test_coarse_distances_are_within_a_cell_of_the_true_ones():
     threshold = 12.0
     d = np.min(np.linalg.norm(pred[0][:, None] - right[None], axis=2), axis=1)
     d = np.minimum(d, threshold)
-    coarse = prior.coarse_screening(pred, right, threshold)
+    coarse = screening.coarse_screening(pred, right, threshold)
     cell = max(1.0, (640 + 2 * threshold) / 320)
     # Per point the error is at most about a cell diagonal (rasterised points and queries).
-    per_point = [prior.coarse_screening(pred[:, i:i + 1], right, threshold)[0] ** 0.5
+    per_point = [screening.coarse_screening(pred[:, i:i + 1], right, threshold)[0] ** 0.5
                  for i in range(0, 2000, 50)]
     assert np.max(np.abs(np.asarray(per_point) - d[::50])) <= 1.5 * cell
     assert abs(coarse[0] - np.sum(d * d)) < 0.1 * np.sum(d * d)
@@ -116,8 +116,8 @@ def test_few_candidates_are_all_screened_exactly():
     left = rng.uniform(0, [640, 480], (100, 2))
     tree = cKDTree(rng.uniform(0, [640, 480], (100, 2)))
     candidates = prior.prior_candidates(PriorConfig(samples=2), 640, 480)
-    assert candidates.shape[0] <= prior.SCREEN_EXACT
-    np.testing.assert_allclose(prior.screen_candidates(candidates, left, tree, 12.0),
+    assert candidates.shape[0] <= screening.SCREEN_EXACT
+    np.testing.assert_allclose(screening.screen_candidates(candidates, left, tree, 12.0),
                                _exact(candidates, left, tree, 12.0), rtol=1e-9)
 
 
@@ -131,12 +131,12 @@ def test_the_short_screening_gives_the_best_candidates_of_the_full_one(seed):
     """
     left, tree = _features(300 + seed)
     candidates = prior.prior_candidates(PriorConfig(), 640, 480)
-    full = np.argsort(prior.screen_candidates(candidates, left, tree, 12.0), kind='stable')
-    short = prior.best_screened(candidates, left, tree, 12.0, 2)
+    full = np.argsort(screening.screen_candidates(candidates, left, tree, 12.0), kind='stable')
+    short = screening.best_screened(candidates, left, tree, 12.0, 2)
     np.testing.assert_array_equal(short, full[:2])
     # The exact energy decides the order (fails if the coarse order were returned).
     exact = _exact(candidates[short], left, tree, 12.0)
     assert exact[0] <= exact[1]
-    few = candidates[:prior.SHORT_EXACT]
-    np.testing.assert_array_equal(prior.best_screened(few, left, tree, 12.0, 3),
+    few = candidates[:screening.SHORT_EXACT]
+    np.testing.assert_array_equal(screening.best_screened(few, left, tree, 12.0, 3),
                                   np.argsort(_exact(few, left, tree, 12.0), kind='stable')[:3])

@@ -14,7 +14,7 @@ from dataclasses import replace
 
 from bag_helpers import (_header, image_msg, LEFT, left_stamp, read_bag, RIGHT, T, tree, TS,
                          write_bag)
-from domplane_ros.config import load_params_file
+from domplane_ros.params_file import load_params_file
 from domplane_ros.replay.cli import EXIT_NO_PAIRS, EXIT_OK, EXIT_REFUSED, main, run_replay
 from domplane_ros.stream.pipeline import PlanePipeline
 import numpy as np

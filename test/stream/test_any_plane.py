@@ -14,8 +14,8 @@ from domplane_ros.core.ground_slope import swap_evidence
 from domplane_ros.core.prior import leaning_candidates, prior_candidates, search_candidates
 from domplane_ros.sim.boards import board_scene
 from domplane_ros.sim.rigs import plane_error_px
+from domplane_ros.stream import ground_rules
 from domplane_ros.stream import search as search_module
-from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream import uniqueness as uniqueness_module
 from domplane_ros.stream.candidates import photometric_estimate
 from domplane_ros.stream.pipeline import PlanePipeline
@@ -146,7 +146,7 @@ def test_a_small_board_in_a_textured_room_is_verified_by_its_own_region(monkeypa
     assert not TrustGate(VerificationSettings()).judge(frame.left, frame.right,
                                                        frame.homography).accepted
     # Switched off, the board is refused for explaining too little of the image.
-    monkeypatch.setattr(trust_module, 'MIN_REGION_SCORE', 1.01)
+    monkeypatch.setattr(ground_rules, 'MIN_REGION_SCORE', 1.01)
     off = TrustGate(ANY).judge(frame.left, frame.right, frame.homography)
     assert not off.accepted and 'explains too little' in off.reason
 
@@ -159,7 +159,7 @@ def test_the_pipeline_publishes_a_small_board_through_lenses_only_by_its_region(
     assert result.ok, result.reason
     assert plane_error_px(frame, result.homography) < 1.0
     # Without the region's score the board explains too little of the image: refused.
-    monkeypatch.setattr(trust_module, 'MIN_REGION_SCORE', 1.01)
+    monkeypatch.setattr(ground_rules, 'MIN_REGION_SCORE', 1.01)
     assert not PlanePipeline(_config('any')).process(frame.left, frame.right, 0).ok
 
 

@@ -1,6 +1,6 @@
 """A ground plane is published only if it explains the bottom of the image as well as the top.
 
-``trust.MIN_BOTTOM_OVER_TOP`` (session 20, round 21 of docs/BENCHMARKS.md): on real texture
+``ground_rules.MIN_BOTTOM_OVER_TOP`` (session 20, round 21 of docs/BENCHMARKS.md): on real texture
 (KITTI 2015 000046, its road homography from the ground-truth disparity) the window ``crop``
 94 of ``tools/evaluate_real_rigs`` (x1 y79 754 x 175: trees, poles and signs above a strip of
 near road) with the documented default prior published a plane through the distant structure
@@ -13,7 +13,7 @@ alone refuses it; the rule is shown on it as measured before (``EXACT_COVERAGE``
 from __future__ import annotations
 
 from domplane_ros.core import verification
-from domplane_ros.stream import trust
+from domplane_ros.stream import ground_rules
 from domplane_ros.tools.evaluate_real_rigs import configs, kitti_base
 from domplane_ros.tools.evaluation.real_rigs import draw
 import pytest
@@ -51,7 +51,7 @@ def test_a_plane_explaining_the_top_over_the_bottom_is_refused(base, monkeypatch
                              for c in (config, far_field_off))
     result, _ = _run(pair, config)
     assert not result.ok and 'of its bottom' in result.reason, result.reason
-    monkeypatch.setattr(trust, 'MIN_BOTTOM_OVER_TOP', 0.0)
+    monkeypatch.setattr(ground_rules, 'MIN_BOTTOM_OVER_TOP', 0.0)
     result, _ = _run(pair, config)
     assert not result.ok and 'its own mask marks' in result.reason, result.reason
     result, error = _run(pair, far_field_off)

@@ -12,6 +12,7 @@ from domplane_ros.config import PlaneNodeConfig
 from domplane_ros.core.verification import agreement_maps, BOTTOM_BAND, verify_plane
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import plane_error_px
+from domplane_ros.stream import ground_rules
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import TrustGate
@@ -90,7 +91,7 @@ def test_a_far_wall_aliasing_a_periodic_floor_is_not_published(monkeypatch):
     frame = random_scene(10002, floor='checker_32')
     result = _run(frame)
     assert not result.ok and not result.mask.any() and result.confidence == 0.0
-    monkeypatch.setattr(trust_module, 'MIN_MIDDLE_SHARE', 0.0)
+    monkeypatch.setattr(ground_rules, 'MIN_MIDDLE_SHARE', 0.0)
     # Its disparity also grows 10 deg off straight down the image: the level-head rule
     # (round 18) refuses it too, so it is switched off to see the plane.
     monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
@@ -113,6 +114,6 @@ def test_a_look_alike_leaning_on_the_far_wall_leaves_the_floor_to_win(monkeypatc
     frame = random_scene(1, floor='checker_128')
     result = _run(frame)
     assert result.ok and plane_error_px(frame, result.homography) < 1.0
-    monkeypatch.setattr(trust_module, 'MIN_MIDDLE_SHARE', 0.0)
+    monkeypatch.setattr(ground_rules, 'MIN_MIDDLE_SHARE', 0.0)
     without = _run(frame)
     assert without.ok and plane_error_px(frame, without.homography) > 1.5

@@ -18,7 +18,7 @@ from domplane_ros.core.prior import plane_homography
 from domplane_ros.sim.model import CameraSetup
 from domplane_ros.sim.render import render_stereo
 from domplane_ros.sim.rigs import plane_error_px
-from domplane_ros.stream import trust
+from domplane_ros.stream import ground_rules
 from domplane_ros.stream.pipeline import PlanePipeline
 from domplane_ros.stream.trust import TrustGate
 from domplane_ros.tools.evaluate_real_rigs import configs, kitti_base
@@ -46,9 +46,9 @@ def test_a_plane_through_distant_structure_is_refused_for_its_slope(base, monkey
     result, _ = _run(pair, config)
     assert not result.ok and 'not the ground of the prior' in result.reason, result.reason
     # Without the rule (a margin of 100 is off in effect) the same pair publishes it, once the
-    # bands rule of round 21 (trust.MIN_BOTTOM_OVER_TOP) is off too: it refuses this plane as
-    # well (top 18 %, bottom 8 % at confidence 0.52).
-    monkeypatch.setattr(trust, 'MIN_BOTTOM_OVER_TOP', 0.0)
+    # bands rule of round 21 (ground_rules.MIN_BOTTOM_OVER_TOP) is off too: it refuses this
+    # plane as well (top 18 %, bottom 8 % at confidence 0.52).
+    monkeypatch.setattr(ground_rules, 'MIN_BOTTOM_OVER_TOP', 0.0)
     result, error = _run(pair, _margin(config, 100.0))
     assert result.ok and error > 5.0, (result.reason, error)
 

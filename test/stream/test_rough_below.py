@@ -19,8 +19,8 @@ from domplane_ros.sim.rigs import plane_error_px, random_rig_error, rough_rig
 from domplane_ros.sim.textures import SIZED_FLOOR_KINDS
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
+from domplane_ros.stream.ground_rules import MAX_BELOW_FRACTION_WEAK, weak_below_refusal
 from domplane_ros.stream.pipeline import PlanePipeline
-from domplane_ros.stream.trust import MAX_BELOW_FRACTION_WEAK, weak_below_refusal
 from domplane_ros.stream.verdict import Verdict
 import numpy as np
 import pytest

@@ -14,9 +14,10 @@ from types import SimpleNamespace
 from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
 from domplane_ros.core import coarse as coarse_module
 from domplane_ros.core import verification
-from domplane_ros.core.estimator import estimate_plane, TwoStep
+from domplane_ros.core.estimator import TwoStep
 from domplane_ros.core.features import detect_corners
 from domplane_ros.core.homography import corner_distance_px
+from domplane_ros.core.plane import estimate_plane
 from domplane_ros.sim.generators import indoor_scene, random_scene, scene_sequence
 from domplane_ros.sim.rigs import (camera_response, cut_sequence, plane_error_px,
                                    random_rig_error, RigError, rough_rig, swapped)

@@ -12,12 +12,13 @@ import math
 
 from domplane_ros.config import one_shot_search, PlaneNodeConfig, VerificationSettings
 from domplane_ros.core.coarse import CoarseAligner
-from domplane_ros.core.estimator import estimate_plane
 from domplane_ros.core.features import detect_corners
+from domplane_ros.core.plane import estimate_plane
 from domplane_ros.core.verification import verify_plane
 from domplane_ros.sim.generators import random_scene
 from domplane_ros.sim.rigs import (camera_response, plane_error_px, random_rig_error, rough_rig,
                                    swapped)
+from domplane_ros.stream import ground_rules
 from domplane_ros.stream import search as search_module
 from domplane_ros.stream import trust as trust_module
 from domplane_ros.stream import uniqueness as uniqueness_module
@@ -63,7 +64,7 @@ def _wrong_without(frame, monkeypatch, *patches, config=None):
     monkeypatch.setattr(search_module, 'WEAK_BELOW_REFUSAL', False)
     monkeypatch.setattr(trust_module.TrustGate, 'rolled_refusal', lambda *args: '')
     monkeypatch.setattr(trust_module.TrustGate, 'slope_refusal', lambda *args: '')
-    monkeypatch.setattr(trust_module, 'MIN_BOTTOM_OVER_TOP', 0.0)
+    monkeypatch.setattr(ground_rules, 'MIN_BOTTOM_OVER_TOP', 0.0)
     for module, name, value in patches:
         monkeypatch.setattr(module, name, value)
     without = _run(frame, config)
@@ -146,7 +147,7 @@ def test_a_swapped_plane_is_a_rival_however_close_it_maps(monkeypatch):
     _wrong_without(frame, monkeypatch,
                    (uniqueness_module, 'is_rival', lambda verdict, h, best, width, height: (
                        verdict.ground and distinct_planes(h, best, width, height))),
-                   (trust_module, 'MAX_BELOW_FRACTION', 1.0))
+                   (ground_rules, 'MAX_BELOW_FRACTION', 1.0))
 
 
 def test_a_plane_through_boxes_is_not_the_ground(monkeypatch, counted_score):
@@ -161,7 +162,7 @@ def test_a_plane_through_boxes_is_not_the_ground(monkeypatch, counted_score):
     # Each of the three ground checks refuses it alone (measured): all off, it is published.
     _wrong_without(frame, monkeypatch, (trust_module, 'MIN_BOTTOM_SCORE', 0.0),
                    (trust_module, 'MIN_BOTTOM_SHARE', 0.0),
-                   (trust_module, 'MAX_BELOW_FRACTION', 1.0), config=_found())
+                   (ground_rules, 'MAX_BELOW_FRACTION', 1.0), config=_found())
 
 
 def test_the_true_floor_explains_the_bottom_of_the_image():
@@ -264,15 +265,16 @@ def _faint_both(seed, config=None):
     return frame, PlanePipeline(config)
 
 
-@pytest.mark.parametrize('seed, name, off', [
+@pytest.mark.parametrize('seed, module, name, off', [
     # 1.28 m faint tiles: a plane through the faces of two boxes (6.6 px off the floor) sees
     # the floor beyond it.
-    (305, 'MAX_BELOW_FRACTION', 1.0),
+    (305, ground_rules, 'MAX_BELOW_FRACTION', 1.0),
     # A far wall's plane (8.1 px off the floor) explains the bottom of the image too little
     # for its score.
-    (212, 'MIN_BOTTOM_SHARE', 0.0),
+    (212, trust_module, 'MIN_BOTTOM_SHARE', 0.0),
 ])
-def test_a_plane_above_the_floor_is_not_the_ground(seed, name, off, monkeypatch, counted_score):
+def test_a_plane_above_the_floor_is_not_the_ground(seed, module, name, off, monkeypatch,
+                                                   counted_score):
     # The plain coarse alignment only: on seed 305 the shifted one adds a plane 4 px off the
     # floor that outranks the plane through the boxes, which would hide the check's part.
     plain = CoarseAligner.candidates
@@ -289,7 +291,7 @@ def test_a_plane_above_the_floor_is_not_the_ground(seed, name, off, monkeypatch,
     frame, pipeline = _faint_both(seed)
     result = pipeline.process(frame.left, frame.right, 0)
     assert not result.ok or plane_error_px(frame, result.homography) < 5.0, result.reason
-    monkeypatch.setattr(trust_module, name, off)
+    monkeypatch.setattr(module, name, off)
     # Session 22's near-field rule refuses these planes too: off, to see this rule alone.
     monkeypatch.setattr(TrustGate, 'near_field_refusal', lambda *args: '')
     frame, pipeline = _faint_both(seed)
@@ -301,7 +303,7 @@ def test_nothing_lies_beyond_the_true_floor():
     for seed in range(3):
         scene = random_scene(seed)
         check = verify_plane(scene.left, scene.right, scene.homography)
-        assert check.below_fraction < 0.2 * trust_module.MAX_BELOW_FRACTION, (seed, check)
+        assert check.below_fraction < 0.2 * ground_rules.MAX_BELOW_FRACTION, (seed, check)
 
 
 @pytest.mark.parametrize('bottom, swapped_expected', [(0.018, False), (0.5, True)])
