@@ -1,8 +1,8 @@
 """The one-call API: the dominant plane's homography from two feature sets.
 
-:func:`estimate_plane` builds the two-step problem (:class:`~domplane_ros.core.estimator.
-TwoStep`) from the features and runs it from a warm start, or, without one, from the best
-candidates of the prior's search (:class:`~domplane_ros.core.prior.PriorSearch`). The stream
+:func:`estimate_plane` builds the two-step problem
+(:class:`~domplane_ros.core.estimator.TwoStep`) from the features and runs it from a warm
+start, or, without one, from the best candidates of the prior's search (:class:`~domplane_ros.core.prior.PriorSearch`). The stream
 (:mod:`domplane_ros.stream`) uses the same two parts with its own search and verification.
 """
 

@@ -4,8 +4,8 @@ A search has hundreds of candidates (the prior's grid, a challenge's prior start
 afford the two-step iteration from a few: each candidate is screened by ``sum_i min(d_i, t)^2``
 over the left points, ``d_i`` the distance of a point's prediction to its closest right point
 (Fornland & Schnörr's energy at a fixed, wide truncation), the best are refined
-(:class:`~domplane_ros.core.prior.PriorSearch`, :meth:`~domplane_ros.core.estimator.TwoStep.
-best_screened`). :func:`screen_candidates` ranks them all (a coarse pass over a distance
+(:class:`~domplane_ros.core.prior.PriorSearch`,
+:meth:`~domplane_ros.core.estimator.TwoStep.best_screened`). :func:`screen_candidates` ranks them all (a coarse pass over a distance
 transform, then the exact energy of the best :data:`SCREEN_EXACT`), :func:`best_screened`
 only the best few, cheaper.
 """

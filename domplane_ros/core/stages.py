@@ -2,8 +2,9 @@
 
 A convex potential runs one stage at ``threshold_px``. A graduated one runs from
 ``gnc_start_px`` down to the threshold by ``gnc_factor``, so that its wide first stages find
-the basin and its last stage decides at the threshold (:class:`~domplane_ros.core.estimator.
-TwoStep` runs them; the energy is monotone within each stage).
+the basin and its last stage decides at the threshold
+(:class:`~domplane_ros.core.estimator.TwoStep` runs them; the energy is monotone within each
+stage).
 """
 
 from __future__ import annotations
