@@ -2,8 +2,9 @@
 
 :func:`estimate_plane` builds the two-step problem
 (:class:`~domplane_ros.core.estimator.TwoStep`) from the features and runs it from a warm
-start, or, without one, from the best candidates of the prior's search (:class:`~domplane_ros.core.prior.PriorSearch`). The stream
-(:mod:`domplane_ros.stream`) uses the same two parts with its own search and verification.
+start, or, without one, from the best candidates of the prior's search
+(:class:`~domplane_ros.core.prior.PriorSearch`). The stream (:mod:`domplane_ros.stream`)
+uses the same two parts with its own search and verification.
 """
 
 from __future__ import annotations

@@ -5,9 +5,9 @@ afford the two-step iteration from a few: each candidate is screened by ``sum_i 
 over the left points, ``d_i`` the distance of a point's prediction to its closest right point
 (Fornland & Schnörr's energy at a fixed, wide truncation), the best are refined
 (:class:`~domplane_ros.core.prior.PriorSearch`,
-:meth:`~domplane_ros.core.estimator.TwoStep.best_screened`). :func:`screen_candidates` ranks them all (a coarse pass over a distance
-transform, then the exact energy of the best :data:`SCREEN_EXACT`), :func:`best_screened`
-only the best few, cheaper.
+:meth:`~domplane_ros.core.estimator.TwoStep.best_screened`). :func:`screen_candidates` ranks
+them all (a coarse pass over a distance transform, then the exact energy of the best
+:data:`SCREEN_EXACT`), :func:`best_screened` only the best few, cheaper.
 """
 
 from __future__ import annotations
